@@ -1,0 +1,173 @@
+# Copyright 2026 probdis_ros contributors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The ``probdis`` command: one entry point, one subcommand per job.
+
+Heavy modules are imported inside each handler so that ``probdis --help`` stays fast.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from typing import Callable
+
+SETTINGS = ('2d', '3d', '3d-orient')
+
+
+class UsageError(Exception):
+    """Bad input from the user: reported as one line, exit status 2."""
+
+
+def _print_json(doc: dict) -> None:
+    print(json.dumps(doc))
+
+
+def cmd_info(args: argparse.Namespace) -> int:
+    """Print the version and where the config and URDF files were found."""
+    from probdis_ros import __version__
+    from probdis_ros.resources import share_dir
+
+    how, share = share_dir()
+    doc = {'version': __version__, 'share': str(share), 'found_by': how,
+           'config': str(share / 'config'), 'urdf': str(share / 'urdf' / 'iiwa14.urdf')}
+    if args.json:
+        _print_json(doc)
+    else:
+        for key, value in doc.items():
+            print(f'{key:>9}: {value}')
+    return 0
+
+
+def cmd_fk(args: argparse.Namespace) -> int:
+    """Forward kinematics of one configuration."""
+    import numpy as np
+
+    from probdis_ros.model import arm_for_setting
+
+    arm = arm_for_setting(args.setting)
+    if len(args.joints) != arm.n_joints:
+        raise UsageError(f'{args.setting} arm has {arm.n_joints} joints '
+                         f'({", ".join(arm.joint_names)}); got {len(args.joints)} values')
+    config = np.array(args.joints, dtype=float)
+    inside = bool(arm.within_limits(config)[0])
+    pose = arm.fk(config)
+    doc = {'setting': args.setting, 'joints': config.tolist(), 'within_limits': inside,
+           'position': pose.positions[0].tolist()}
+    if pose.orientations is not None:
+        doc['quaternion_wxyz'] = pose.orientations[0].tolist()
+    if args.json:
+        _print_json(doc)
+    else:
+        print('position  ' + ' '.join(f'{v: .6f}' for v in doc['position']))
+        if 'quaternion_wxyz' in doc:
+            print('quat wxyz ' + ' '.join(f'{v: .6f}' for v in doc['quaternion_wxyz']))
+        if not inside:
+            print('warning: configuration is outside the joint limits', file=sys.stderr)
+    return 0
+
+
+def cmd_bench_fk(args: argparse.Namespace) -> int:
+    """Batched FK throughput."""
+    from probdis_ros.bench import bench_fk
+
+    result = bench_fk(args.setting, args.configs, args.repeats, args.seed)
+    if args.json:
+        _print_json({'configs_per_s': result['configs_per_s']})
+    else:
+        print(f'FK {result["setting"]}: {result["configs_per_s"] / 1e6:.2f} M configurations/s '
+              f'(median of {result["repeats"]} x {result["configs"]}, one thread)')
+        print(f'machine: {result["machine"]}')
+    return 0
+
+
+def cmd_map_plot(args: argparse.Namespace) -> int:
+    """Draw a 2-D failure probability map as a PNG."""
+    from probdis_ros.model import FailureMap
+    from probdis_ros.plots import example_map, plot_map
+
+    fmap = FailureMap.load(args.map) if args.map else example_map(args.c_fail)
+    extent = tuple(args.extent) if args.extent else None
+    title = f'{args.map}' if args.map else 'Failure probability around three failures'
+    out = plot_map(fmap, args.out, extent, title=title)
+    print(f'wrote {out} ({len(fmap)} failures)')
+    return 0
+
+
+def _positive_int(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f'must be at least 1, got {value}')
+    return value
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of every subcommand."""
+    parser = argparse.ArgumentParser(
+        prog='probdis', description='Probabilistic disentangling for the KUKA LBR iiwa.')
+    sub = parser.add_subparsers(dest='command', required=True, metavar='COMMAND')
+
+    info = sub.add_parser('info', help='version and where config/ and urdf/ were found')
+    info.add_argument('--json', action='store_true', help='print one JSON object')
+    info.set_defaults(handler=cmd_info)
+
+    fk = sub.add_parser('fk', help='forward kinematics of one configuration')
+    fk.add_argument('joints', nargs='+', type=float, metavar='Q', help='joint positions [rad]')
+    fk.add_argument('--setting', choices=SETTINGS, default='3d-orient',
+                    help='arm and task space (default: iiwa with orientation)')
+    fk.add_argument('--json', action='store_true', help='print one JSON object')
+    fk.set_defaults(handler=cmd_fk)
+
+    bench = sub.add_parser('bench', help='measured benchmarks')
+    bench_sub = bench.add_subparsers(dest='bench', required=True, metavar='BENCH')
+    bfk = bench_sub.add_parser('fk', help='batched forward kinematics, configurations/s')
+    bfk.add_argument('--setting', choices=SETTINGS, default='3d-orient')
+    bfk.add_argument('--configs', type=_positive_int, default=200_000)
+    bfk.add_argument('--repeats', type=_positive_int, default=5)
+    bfk.add_argument('--seed', type=int, default=0)
+    bfk.add_argument('--json', action='store_true', help='print {"configs_per_s": float}')
+    bfk.set_defaults(handler=cmd_bench_fk)
+
+    fmap = sub.add_parser('map', help='failure maps')
+    map_sub = fmap.add_subparsers(dest='map_command', required=True, metavar='ACTION')
+    plot = map_sub.add_parser('plot', help='draw a 2-D probability map as a PNG')
+    plot.add_argument('--map', help='a 2-D failure map file (default: an example map)')
+    plot.add_argument('--out', default='failure_map.png', help='PNG to write')
+    plot.add_argument('--c-fail', type=float, default=100.0,
+                      help='C_FAIL of the example map [1/m^2]')
+    plot.add_argument('--extent', type=float, nargs=4, metavar=('X0', 'X1', 'Y0', 'Y1'))
+    plot.set_defaults(handler=cmd_map_plot)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the command line; return the exit status."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    handler: Callable[[argparse.Namespace], int] = args.handler
+    from probdis_ros.model import FailureMapError
+
+    try:
+        return handler(args)
+    except (UsageError, FailureMapError, FileNotFoundError, ValueError) as err:
+        print(f'probdis: error: {err}', file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print('probdis: interrupted', file=sys.stderr)
+        return 130
+
+
+if __name__ == '__main__':
+    sys.exit(main())

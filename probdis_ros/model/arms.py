@@ -1,0 +1,229 @@
+# Copyright 2026 probdis_ros contributors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""Arms and batched forward kinematics, free of ROS.
+
+Planning evaluates hundreds of thousands of configurations per plan, so every arm maps a
+whole batch of joint configurations ``(N, n_joints)`` to task space at once.  Two arms:
+
+* :class:`PlanarArm`, the paper's 2-D setting: a planar chain whose task space is the
+  end-effector point in the plane.
+* :class:`SerialChainArm`, a serial revolute chain read from a URDF through pinocchio (the
+  iiwa 14 in ``urdf/iiwa14.urdf``).  Pinocchio parses the model, but one pinocchio call per
+  configuration from Python is far slower than the planner needs, so a compiled loop over
+  constant matrices (:func:`probdis_ros.model.kernels.chain_kernel`) evaluates the batch.  The tests check both against pinocchio and
+  yourdfpy.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from enum import Enum
+from pathlib import Path
+
+import numpy as np
+
+from probdis_ros.model.kernels import chain_kernel, quaternion_kernel
+
+
+class TaskSpace(str, Enum):
+    """What part of the end-effector pose the failure map sees."""
+
+    POINT2 = 'point2'
+    POINT3 = 'point3'
+    POSE3 = 'pose3'
+
+    @property
+    def dim(self) -> int:
+        """Number of position coordinates."""
+        return 2 if self is TaskSpace.POINT2 else 3
+
+    @property
+    def has_orientation(self) -> bool:
+        """Whether a unit quaternion accompanies the position."""
+        return self is TaskSpace.POSE3
+
+
+@dataclass(frozen=True)
+class TaskPoints:
+    """End-effector poses of a batch: positions ``(N, d)``, quaternions ``(N, 4)`` or None.
+
+    Quaternions are ``(w, x, y, z)`` with ``w >= 0``.
+    """
+
+    positions: np.ndarray
+    orientations: np.ndarray | None = None
+
+    def __len__(self) -> int:
+        return len(self.positions)
+
+
+class Arm(ABC):
+    """A robot arm: joint names, limits and batched forward kinematics."""
+
+    name: str
+    joint_names: tuple[str, ...]
+    lower: np.ndarray
+    upper: np.ndarray
+    velocity_limits: np.ndarray
+    task_space: TaskSpace
+
+    @property
+    def n_joints(self) -> int:
+        """Number of joints (the dimension of configuration space)."""
+        return len(self.joint_names)
+
+    @abstractmethod
+    def fk(self, configs: np.ndarray) -> TaskPoints:
+        """Map configurations ``(N, n_joints)`` (or one ``(n_joints,)``) to task space."""
+
+    def as_batch(self, configs: np.ndarray) -> np.ndarray:
+        """Return configs as a float ``(N, n_joints)`` array, or raise ValueError."""
+        batch = np.atleast_2d(np.asarray(configs, dtype=float))
+        if batch.ndim != 2 or batch.shape[1] != self.n_joints:
+            raise ValueError(
+                f'{self.name}: expected configurations with {self.n_joints} joints, '
+                f'got an array of shape {np.shape(configs)}')
+        return batch
+
+    def within_limits(self, configs: np.ndarray, tol: float = 1e-9) -> np.ndarray:
+        """Boolean mask of the configurations inside the position limits."""
+        batch = self.as_batch(configs)
+        return np.all((batch >= self.lower - tol) & (batch <= self.upper + tol), axis=1)
+
+    def random_configurations(self, rng: np.random.Generator, n: int) -> np.ndarray:
+        """Draw n configurations uniformly within the position limits."""
+        return rng.uniform(self.lower, self.upper, size=(n, self.n_joints))
+
+
+class PlanarArm(Arm):
+    """Planar chain of revolute joints; the task space is the 2-D tip point.
+
+    Joint i turns link i relative to link i-1, so the tip is
+    ``sum_i l_i (cos, sin)(q_1 + ... + q_i)``.
+    """
+
+    def __init__(self, link_lengths: tuple[float, ...] = (0.1,) * 7,
+                 limit: float = np.pi * 5 / 6, velocity_limit: float = 1.0) -> None:
+        n = len(link_lengths)
+        self.name = 'planar'
+        self.link_lengths = np.asarray(link_lengths, dtype=float)
+        self.joint_names = tuple(f'joint_{i + 1}' for i in range(n))
+        self.lower = np.full(n, -limit)
+        self.lower[0] = -np.pi
+        self.upper = -self.lower
+        self.velocity_limits = np.full(n, velocity_limit)
+        self.task_space = TaskSpace.POINT2
+
+    def fk(self, configs: np.ndarray) -> TaskPoints:
+        """Tip points ``(N, 2)`` of the planar chain."""
+        angles = np.cumsum(self.as_batch(configs), axis=1)
+        tip = np.stack([np.cos(angles) @ self.link_lengths,
+                        np.sin(angles) @ self.link_lengths], axis=1)
+        return TaskPoints(tip)
+
+    def link_points(self, config: np.ndarray) -> np.ndarray:
+        """Base, joint and tip points ``(n + 1, 2)`` of one configuration, for drawing."""
+        angles = np.cumsum(self.as_batch(config)[0])
+        steps = self.link_lengths[:, None] * np.stack([np.cos(angles), np.sin(angles)], axis=1)
+        return np.vstack([np.zeros(2), np.cumsum(steps, axis=0)])
+
+
+@dataclass(frozen=True)
+class _Joint:
+    """One revolute joint: parent-frame offset, and rotation as constant matrices.
+
+    The child frame's rotation relative to the parent is ``A0 + cos(q) A1 + sin(q) A2``
+    (origin rotation times Rodrigues' formula), stacked as ``basis = [A0 | A1 | A2]``.
+    """
+
+    offset: np.ndarray
+    basis: np.ndarray
+
+
+def _revolute(origin_rotation: np.ndarray, origin_offset: np.ndarray, axis: np.ndarray) -> _Joint:
+    axis = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
+    outer = np.outer(axis, axis)
+    cross = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
+    parts = [origin_rotation @ m for m in (outer, np.eye(3) - outer, cross)]
+    return _Joint(np.asarray(origin_offset, dtype=float), np.hstack(parts))
+
+
+def rotation_to_quaternion(rot: np.ndarray) -> np.ndarray:
+    """Unit quaternions ``(N, 4)`` as ``(w, x, y, z)``, ``w >= 0``, of rotations ``(N, 3, 3)``."""
+    rot = np.ascontiguousarray(rot, dtype=float).reshape(-1, 3, 3)
+    quat = np.empty((len(rot), 4))
+    quaternion_kernel(rot, quat)
+    return quat
+
+
+class SerialChainArm(Arm):
+    """A serial chain of revolute joints, read from a URDF with pinocchio."""
+
+    def __init__(self, name: str, joint_names: tuple[str, ...], joints: list[_Joint],
+                 tip_offset: np.ndarray, tip_rotation: np.ndarray, lower: np.ndarray,
+                 upper: np.ndarray, velocity_limits: np.ndarray,
+                 with_orientation: bool) -> None:
+        self.name = name
+        self.joint_names = joint_names
+        self._offsets = np.array([j.offset for j in joints])
+        self._bases = np.array([j.basis.reshape(3, 3, 3).transpose(1, 0, 2) for j in joints])
+        self._tip_offset = tip_offset
+        self._tip_rotation = tip_rotation
+        self.lower, self.upper, self.velocity_limits = lower, upper, velocity_limits
+        self.task_space = TaskSpace.POSE3 if with_orientation else TaskSpace.POINT3
+
+    @classmethod
+    def from_urdf(cls, urdf: str | Path, tip_frame: str,
+                  with_orientation: bool = True) -> SerialChainArm:
+        """Build the chain from a URDF whose movable joints are all revolute."""
+        import pinocchio as pin
+
+        model = pin.buildModelFromUrdf(str(urdf))
+        joints = []
+        zero = pin.neutral(model)
+        for jmodel, placement in zip(model.joints[1:], model.jointPlacements[1:]):
+            if jmodel.nq != 1 or not jmodel.shortname().startswith(('JointModelR', 'JointModelRevolute')):
+                raise ValueError(f'{urdf}: only revolute joints are supported, '
+                                 f'found {jmodel.shortname()}')
+            jdata = jmodel.createData()
+            jmodel.calc(jdata, zero)
+            axis = np.asarray(jdata.S).reshape(6)[3:]
+            joints.append(_revolute(placement.rotation, placement.translation, axis))
+        if not model.existFrame(tip_frame):
+            raise ValueError(f'{urdf}: no frame named {tip_frame!r}')
+        frame = model.frames[model.getFrameId(tip_frame)]
+        if frame.parentJoint != model.njoints - 1:
+            raise ValueError(f'{urdf}: frame {tip_frame!r} is not attached to the last joint')
+        return cls(model.name, tuple(model.names[1:]), joints,
+                   np.array(frame.placement.translation), np.array(frame.placement.rotation),
+                   np.array(model.lowerPositionLimit), np.array(model.upperPositionLimit),
+                   np.array(model.velocityLimit), with_orientation)
+
+    def tip_frames(self, configs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Tip positions ``(N, 3)`` and rotation matrices ``(N, 3, 3)``."""
+        batch = self.as_batch(configs)
+        positions = np.empty((len(batch), 3))
+        rotations = np.empty((len(batch), 3, 3))
+        chain_kernel(batch, self._offsets, self._bases, self._tip_offset, self._tip_rotation,
+                     positions, rotations)
+        return positions, rotations
+
+    def fk(self, configs: np.ndarray) -> TaskPoints:
+        """Tip positions, with quaternions when the task space has orientation."""
+        positions, rotations = self.tip_frames(configs)
+        if self.task_space.has_orientation:
+            return TaskPoints(positions, rotation_to_quaternion(rotations))
+        return TaskPoints(positions)

@@ -1,0 +1,194 @@
+# Copyright 2026 probdis_ros contributors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The failure map: blocked movements and the failure probability they imply.
+
+A failure ``f = (x_fail, v_fail, q_fail)`` records where the arm was blocked (task-space
+point), the task-space direction it was moving in, and, where orientation is modelled, the
+end-effector orientation (unit quaternion ``(w, x, y, z)``).  As in the paper and DESIGN.md::
+
+    P(FAIL | c, F) = max_f  P_COORD(c, f) * (1 - 0.5 * D_ORIENT(c, f))
+    P_COORD        = (alpha / pi)^3 / (1 + C_FAIL * |x - x_fail|^2)
+    D_ORIENT       = (2 / pi) * arccos(|q . q_fail|)          (0 without orientation)
+
+where alpha in [0, pi] is the angle between ``v_fail`` and ``x_fail - x`` (pi at
+``x = x_fail``): high beyond the failure in the blocked direction, low behind it.
+
+File format (JSON, written atomically; see README "Failure map files")::
+
+    {"format": "probdis-failure-map", "version": 1, "task_space": "point2|point3|pose3",
+     "c_fail": 100.0,
+     "failures": [{"x": [...], "v": [...], "q": [w, x, y, z] or null}, ...]}
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from pathlib import Path
+import tempfile
+
+import numpy as np
+
+from probdis_ros.model.arms import TaskPoints, TaskSpace
+
+FORMAT = 'probdis-failure-map'
+VERSION = 1
+
+#: Default C_FAIL in 1/m^2: the probability halves 0.1 m from a failure.
+DEFAULT_C_FAIL = 100.0
+
+
+class FailureMapError(ValueError):
+    """A failure map file or failure that cannot be used, with the reason."""
+
+
+class FailureMap:
+    """The set of failures and the batched probability ``P(FAIL | c, F)``."""
+
+    def __init__(self, task_space: TaskSpace, c_fail: float = DEFAULT_C_FAIL) -> None:
+        if not (math.isfinite(c_fail) and c_fail > 0):
+            raise FailureMapError(f'c_fail must be a positive number, got {c_fail!r}')
+        self.task_space = TaskSpace(task_space)
+        self.c_fail = float(c_fail)
+        dim = self.task_space.dim
+        self.points = np.empty((0, dim))
+        self.directions = np.empty((0, dim))
+        self.orientations = np.empty((0, 4))
+
+    def __len__(self) -> int:
+        return len(self.points)
+
+    def add(self, x: np.ndarray, v: np.ndarray, q: np.ndarray | None = None) -> None:
+        """Record a blocked movement at x, moving along v, with orientation q."""
+        dim = self.task_space.dim
+        x = np.asarray(x, dtype=float).reshape(-1)
+        v = np.asarray(v, dtype=float).reshape(-1)
+        if x.shape != (dim,) or v.shape != (dim,):
+            raise FailureMapError(f'a failure in {self.task_space.value} needs x and v of '
+                                  f'length {dim}, got {x.size} and {v.size}')
+        speed = np.linalg.norm(v)
+        if not (np.all(np.isfinite(x)) and np.isfinite(speed) and speed > 0):
+            raise FailureMapError('a failure needs a finite point and a nonzero finite direction')
+        if self.task_space.has_orientation:
+            if q is None:
+                raise FailureMapError('this map models orientation: a failure needs q')
+            q = np.asarray(q, dtype=float).reshape(-1)
+            norm = np.linalg.norm(q)
+            if q.shape != (4,) or not (np.isfinite(norm) and norm > 0):
+                raise FailureMapError('q must be a nonzero quaternion (w, x, y, z)')
+            q = q / norm
+        else:
+            q = np.array([1.0, 0.0, 0.0, 0.0])
+        self.points = np.vstack([self.points, x])
+        self.directions = np.vstack([self.directions, v / speed])
+        self.orientations = np.vstack([self.orientations, q])
+
+    def clear(self) -> None:
+        """Forget every failure."""
+        self.__init__(self.task_space, self.c_fail)
+
+    def probability(self, poses: TaskPoints) -> np.ndarray:
+        """``P(FAIL | c, F)`` for each pose of the batch, in [0, 1] (0 for an empty map)."""
+        x = np.asarray(poses.positions, dtype=float)
+        if len(self) == 0:
+            return np.zeros(len(x))
+        to_fail = self.points[None, :, :] - x[:, None, :]            # (N, F, d)
+        dist2 = np.einsum('nfd,nfd->nf', to_fail, to_fail)
+        dist = np.sqrt(dist2)
+        cos_alpha = np.einsum('nfd,fd->nf', to_fail, self.directions)
+        with np.errstate(invalid='ignore', divide='ignore'):
+            cos_alpha = np.where(dist > 0, cos_alpha / dist, -1.0)
+        alpha = np.arccos(np.clip(cos_alpha, -1.0, 1.0))
+        prob = (alpha / np.pi) ** 3 / (1.0 + self.c_fail * dist2)
+        if self.task_space.has_orientation:
+            if poses.orientations is None:
+                raise FailureMapError('this map models orientation: poses need quaternions')
+            dots = np.abs(poses.orientations @ self.orientations.T)
+            d_orient = (2.0 / np.pi) * np.arccos(np.clip(dots, 0.0, 1.0))
+            prob = prob * (1.0 - 0.5 * d_orient)
+        return prob.max(axis=1)
+
+    # -- files -------------------------------------------------------------------------
+
+    def to_dict(self) -> dict:
+        """The map as the JSON document of the file format."""
+        with_q = self.task_space.has_orientation
+        return {
+            'format': FORMAT, 'version': VERSION, 'task_space': self.task_space.value,
+            'c_fail': self.c_fail,
+            'failures': [
+                {'x': x.tolist(), 'v': v.tolist(), 'q': q.tolist() if with_q else None}
+                for x, v, q in zip(self.points, self.directions, self.orientations)],
+        }
+
+    def save(self, path: str | Path) -> None:
+        """Write the map atomically: a crash leaves the old file or the new one, never half."""
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f'.{path.name}.', suffix='.tmp', dir=path.parent)
+        try:
+            with os.fdopen(fd, 'w') as out:
+                json.dump(self.to_dict(), out, indent=1)
+                out.write('\n')
+                out.flush()
+                os.fsync(out.fileno())
+            os.replace(tmp, path)
+        except BaseException:
+            Path(tmp).unlink(missing_ok=True)
+            raise
+
+    @classmethod
+    def from_dict(cls, doc: object, source: str = 'failure map') -> FailureMap:
+        """Build a map from its JSON document, validating every field first."""
+        if not isinstance(doc, dict) or doc.get('format') != FORMAT:
+            raise FailureMapError(f'{source}: not a {FORMAT} document')
+        if doc.get('version') != VERSION:
+            raise FailureMapError(f'{source}: unsupported version {doc.get("version")!r}, '
+                                  f'this probdis reads version {VERSION}')
+        try:
+            task_space = TaskSpace(doc.get('task_space'))
+        except ValueError:
+            raise FailureMapError(f'{source}: unknown task_space {doc.get("task_space")!r}')
+        c_fail = doc.get('c_fail')
+        if not isinstance(c_fail, (int, float)) or isinstance(c_fail, bool):
+            raise FailureMapError(f'{source}: c_fail must be a number')
+        failures = doc.get('failures')
+        if not isinstance(failures, list):
+            raise FailureMapError(f'{source}: failures must be a list')
+        fmap = cls(task_space, float(c_fail))
+        for i, entry in enumerate(failures):
+            if not isinstance(entry, dict):
+                raise FailureMapError(f'{source}: failure {i} is not an object')
+            try:
+                fmap.add(entry.get('x'), entry.get('v'), entry.get('q'))
+            except (FailureMapError, TypeError, ValueError) as err:
+                raise FailureMapError(f'{source}: failure {i}: {err}') from None
+        return fmap
+
+    @classmethod
+    def load(cls, path: str | Path) -> FailureMap:
+        """Read a map file; a missing, partial or corrupt file raises FailureMapError."""
+        path = Path(path)
+        try:
+            text = path.read_text()
+        except OSError as err:
+            raise FailureMapError(f'cannot read failure map {path}: {err.strerror}') from None
+        try:
+            doc = json.loads(text)
+        except json.JSONDecodeError as err:
+            raise FailureMapError(f'{path}: not valid JSON (truncated or corrupt?): {err}') \
+                from None
+        return cls.from_dict(doc, source=str(path))

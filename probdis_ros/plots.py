@@ -1,0 +1,90 @@
+# Copyright 2026 probdis_ros contributors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""Pictures: the 2-D failure probability map (the paper's Fig. 6).
+
+matplotlib is imported lazily and always with the Agg backend, so plotting works on a robot
+PC without a display.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from probdis_ros.model import FailureMap, TaskPoints, TaskSpace
+
+
+def example_map(c_fail: float = 100.0) -> FailureMap:
+    """A few failures around a disc at (0.3, 0.1), r = 0.08: blocked from three sides."""
+    fmap = FailureMap(TaskSpace.POINT2, c_fail)
+    centre, radius = np.array([0.3, 0.1]), 0.08
+    for approach in (0.0, 0.6, -0.7):
+        v = np.array([np.cos(approach), np.sin(approach)])
+        fmap.add(centre - radius * v, v)
+    return fmap
+
+
+def probability_grid(fmap: FailureMap, extent: tuple[float, float, float, float],
+                     resolution: int = 300) -> np.ndarray:
+    """``P(FAIL)`` on a ``resolution x resolution`` grid over extent (x0, x1, y0, y1)."""
+    xs = np.linspace(extent[0], extent[1], resolution)
+    ys = np.linspace(extent[2], extent[3], resolution)
+    gx, gy = np.meshgrid(xs, ys)
+    points = np.column_stack([gx.ravel(), gy.ravel()])
+    return fmap.probability(TaskPoints(points)).reshape(resolution, resolution)
+
+
+def auto_extent(fmap: FailureMap, margin: float = 0.25) -> tuple[float, float, float, float]:
+    """A square view around the failures."""
+    if len(fmap) == 0:
+        return (-margin, margin, -margin, margin)
+    lo = fmap.points.min(axis=0) - margin
+    hi = fmap.points.max(axis=0) + margin
+    half = max(hi - lo) / 2
+    mid = (lo + hi) / 2
+    return (mid[0] - half, mid[0] + half, mid[1] - half, mid[1] + half)
+
+
+def plot_map(fmap: FailureMap, out: str | Path,
+             extent: tuple[float, float, float, float] | None = None,
+             title: str = 'Failure probability map') -> Path:
+    """Draw P(FAIL) (dark = likely blocked), failures (red) and their directions (blue)."""
+    if fmap.task_space is not TaskSpace.POINT2:
+        raise ValueError(f'map plot draws 2-D maps; this map is {fmap.task_space.value}')
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    extent = extent or auto_extent(fmap)
+    grid = probability_grid(fmap, extent)
+    fig, ax = plt.subplots(figsize=(5.5, 5))
+    image = ax.imshow(grid, origin='lower', extent=extent, cmap='gray_r', vmin=0.0, vmax=1.0)
+    fig.colorbar(image, ax=ax, label='P(FAIL)', shrink=0.8)
+    if len(fmap):
+        scale = 0.08 * (extent[1] - extent[0])
+        ax.quiver(fmap.points[:, 0], fmap.points[:, 1], fmap.directions[:, 0] * scale,
+                  fmap.directions[:, 1] * scale, color='tab:blue', angles='xy',
+                  scale_units='xy', scale=1, width=0.008, label='blocked direction')
+        ax.plot(fmap.points[:, 0], fmap.points[:, 1], 'o', color='tab:red', label='failure')
+        ax.legend(loc='upper left', fontsize=8)
+    ax.set_xlabel('x [m]')
+    ax.set_ylabel('y [m]')
+    ax.set_title(title)
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=120, bbox_inches='tight')
+    plt.close(fig)
+    return out
