@@ -22,7 +22,8 @@ package_name = 'probdis_ros'
 
 def share(subdir: str, pattern: str) -> tuple[str, list[str]]:
     """Install the files matching pattern under share/probdis_ros/subdir."""
-    return (os.path.join('share', package_name, subdir), sorted(glob(os.path.join(subdir, pattern))))
+    files = sorted(glob(os.path.join(subdir, pattern)))
+    return (os.path.join('share', package_name, subdir), files)
 
 
 setup(

@@ -22,12 +22,11 @@ import statistics
 import time
 
 import numpy as np
-
 from probdis_ros.model import arm_for_setting
 
 
 def machine() -> str:
-    """One line naming the CPU, core count and Python, for reports of measured figures."""
+    """Name the CPU, core count and Python in one line, for reports of measured figures."""
     cpu = platform.processor() or platform.machine()
     try:
         with open('/proc/cpuinfo') as info:
@@ -42,7 +41,8 @@ def machine() -> str:
 
 def bench_fk(setting: str = '3d-orient', configs: int = 200_000, repeats: int = 5,
              seed: int = 0) -> dict:
-    """Batched FK throughput: median configurations per second over repeats, one thread.
+    """
+    Measure batched FK: median configurations per second over repeats, one thread.
 
     The first call (which compiles the kernel) is excluded.
     """

@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""The ``probdis`` command: one entry point, one subcommand per job.
+"""
+The ``probdis`` command: one entry point, one subcommand per job.
 
 Heavy modules are imported inside each handler so that ``probdis --help`` stays fast.
 """
@@ -20,9 +21,9 @@ Heavy modules are imported inside each handler so that ``probdis --help`` stays 
 from __future__ import annotations
 
 import argparse
+from collections.abc import Callable
 import json
 import sys
-from typing import Callable
 
 SETTINGS = ('2d', '3d', '3d-orient')
 
@@ -52,9 +53,8 @@ def cmd_info(args: argparse.Namespace) -> int:
 
 
 def cmd_fk(args: argparse.Namespace) -> int:
-    """Forward kinematics of one configuration."""
+    """Print the forward kinematics of one configuration."""
     import numpy as np
-
     from probdis_ros.model import arm_for_setting
 
     arm = arm_for_setting(args.setting)
@@ -80,7 +80,7 @@ def cmd_fk(args: argparse.Namespace) -> int:
 
 
 def cmd_bench_fk(args: argparse.Namespace) -> int:
-    """Batched FK throughput."""
+    """Measure batched FK throughput."""
     from probdis_ros.bench import bench_fk
 
     result = bench_fk(args.setting, args.configs, args.repeats, args.seed)
@@ -114,7 +114,7 @@ def _positive_int(text: str) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The argument parser of every subcommand."""
+    """Build the argument parser of every subcommand."""
     parser = argparse.ArgumentParser(
         prog='probdis', description='Probabilistic disentangling for the KUKA LBR iiwa.')
     sub = parser.add_subparsers(dest='command', required=True, metavar='COMMAND')

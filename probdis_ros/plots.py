@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Pictures: the 2-D failure probability map (the paper's Fig. 6).
+"""
+Pictures: the 2-D failure probability map (the paper's Fig. 6).
 
 matplotlib is imported lazily and always with the Agg backend, so plotting works on a robot
 PC without a display.
@@ -23,12 +24,11 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-
 from probdis_ros.model import FailureMap, TaskPoints, TaskSpace
 
 
 def example_map(c_fail: float = 100.0) -> FailureMap:
-    """A few failures around a disc at (0.3, 0.1), r = 0.08: blocked from three sides."""
+    """Build a map of failures around a disc at (0.3, 0.1), r = 0.08, hit from three sides."""
     fmap = FailureMap(TaskSpace.POINT2, c_fail)
     centre, radius = np.array([0.3, 0.1]), 0.08
     for approach in (0.0, 0.6, -0.7):
@@ -39,7 +39,7 @@ def example_map(c_fail: float = 100.0) -> FailureMap:
 
 def probability_grid(fmap: FailureMap, extent: tuple[float, float, float, float],
                      resolution: int = 300) -> np.ndarray:
-    """``P(FAIL)`` on a ``resolution x resolution`` grid over extent (x0, x1, y0, y1)."""
+    """Evaluate ``P(FAIL)`` on a ``resolution x resolution`` grid over (x0, x1, y0, y1)."""
     xs = np.linspace(extent[0], extent[1], resolution)
     ys = np.linspace(extent[2], extent[3], resolution)
     gx, gy = np.meshgrid(xs, ys)
@@ -48,7 +48,7 @@ def probability_grid(fmap: FailureMap, extent: tuple[float, float, float, float]
 
 
 def auto_extent(fmap: FailureMap, margin: float = 0.25) -> tuple[float, float, float, float]:
-    """A square view around the failures."""
+    """Return a square view (x0, x1, y0, y1) around the failures."""
     if len(fmap) == 0:
         return (-margin, margin, -margin, margin)
     lo = fmap.points.min(axis=0) - margin

@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Where the package's data files (config/, urdf/) are, however it was installed.
+"""
+Where the package's data files (config/, urdf/) are, however it was installed.
 
 * colcon build: ``share/probdis_ros`` found through the ament index (AMENT_PREFIX_PATH).
 * editable install or a source checkout: the folders next to the package source.
@@ -30,8 +31,7 @@ PACKAGE = 'probdis_ros'
 
 def _ament_share() -> Path | None:
     try:
-        from ament_index_python.packages import (
-            get_package_share_directory, PackageNotFoundError)
+        from ament_index_python.packages import get_package_share_directory, PackageNotFoundError
     except ImportError:
         return None
     try:
@@ -41,7 +41,7 @@ def _ament_share() -> Path | None:
 
 
 def share_candidates() -> list[tuple[str, Path]]:
-    """Where data files may be, most specific first, with how each was found."""
+    """List where data files may be, most specific first, with how each was found."""
     found = []
     ament = _ament_share()
     if ament is not None:
@@ -52,7 +52,7 @@ def share_candidates() -> list[tuple[str, Path]]:
 
 
 def share_dir() -> tuple[str, Path]:
-    """The first place that holds both config/ and urdf/, and how it was found."""
+    """Return the first place holding both config/ and urdf/, and how it was found."""
     candidates = share_candidates()
     for how, path in candidates:
         if (path / 'config').is_dir() and (path / 'urdf').is_dir():
@@ -63,7 +63,7 @@ def share_dir() -> tuple[str, Path]:
 
 
 def data_file(*parts: str) -> Path:
-    """Path of a file shipped with the package, e.g. ``data_file('urdf', 'iiwa14.urdf')``."""
+    """Return the path of a file shipped with the package (e.g. urdf/iiwa14.urdf)."""
     path = share_dir()[1].joinpath(*parts)
     if not path.exists():
         raise FileNotFoundError(f'{PACKAGE} data file missing: {path}')

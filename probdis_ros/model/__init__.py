@@ -16,7 +16,7 @@
 
 from __future__ import annotations
 
-from functools import lru_cache
+from functools import cache
 
 from probdis_ros.model.arms import Arm, PlanarArm, SerialChainArm, TaskPoints, TaskSpace
 from probdis_ros.model.failure_map import FailureMap, FailureMapError
@@ -27,9 +27,9 @@ SETTINGS = ('2d', '3d', '3d-orient')
 IIWA_TIP_FRAME = 'lbr_link_ee'
 
 
-@lru_cache(maxsize=None)
+@cache
 def iiwa_arm(with_orientation: bool = True) -> SerialChainArm:
-    """The LBR iiwa 14 R820 from the package's URDF, flange as the tip."""
+    """Load the LBR iiwa 14 R820 from the package's URDF, flange as the tip."""
     from probdis_ros.resources import data_file
 
     return SerialChainArm.from_urdf(data_file('urdf', 'iiwa14.urdf'), IIWA_TIP_FRAME,
@@ -37,7 +37,7 @@ def iiwa_arm(with_orientation: bool = True) -> SerialChainArm:
 
 
 def arm_for_setting(setting: str) -> Arm:
-    """The arm of one of the paper's settings: '2d', '3d' or '3d-orient'."""
+    """Return the arm of one of the paper's settings: '2d', '3d' or '3d-orient'."""
     if setting == '2d':
         return PlanarArm()
     if setting == '3d':
@@ -47,5 +47,15 @@ def arm_for_setting(setting: str) -> Arm:
     raise ValueError(f'unknown setting {setting!r}; choose one of {", ".join(SETTINGS)}')
 
 
-__all__ = ['Arm', 'FailureMap', 'FailureMapError', 'PlanarArm', 'SETTINGS', 'SerialChainArm',
-           'TaskPoints', 'TaskSpace', 'arm_for_setting', 'iiwa_arm']
+__all__ = [
+    'SETTINGS',
+    'Arm',
+    'FailureMap',
+    'FailureMapError',
+    'PlanarArm',
+    'SerialChainArm',
+    'TaskPoints',
+    'TaskSpace',
+    'arm_for_setting',
+    'iiwa_arm',
+]

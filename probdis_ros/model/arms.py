@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Arms and batched forward kinematics, free of ROS.
+"""
+Arms and batched forward kinematics, free of ROS.
 
 Planning evaluates hundreds of thousands of configurations per plan, so every arm maps a
 whole batch of joint configurations ``(N, n_joints)`` to task space at once.  Two arms:
@@ -22,8 +23,8 @@ whole batch of joint configurations ``(N, n_joints)`` to task space at once.  Tw
 * :class:`SerialChainArm`, a serial revolute chain read from a URDF through pinocchio (the
   iiwa 14 in ``urdf/iiwa14.urdf``).  Pinocchio parses the model, but one pinocchio call per
   configuration from Python is far slower than the planner needs, so a compiled loop over
-  constant matrices (:func:`probdis_ros.model.kernels.chain_kernel`) evaluates the batch.  The tests check both against pinocchio and
-  yourdfpy.
+  constant matrices (:func:`probdis_ros.model.kernels.chain_kernel`) evaluates the batch.
+  The tests check it against pinocchio and yourdfpy.
 """
 
 from __future__ import annotations
@@ -34,7 +35,6 @@ from enum import Enum
 from pathlib import Path
 
 import numpy as np
-
 from probdis_ros.model.kernels import chain_kernel, quaternion_kernel
 
 
@@ -47,18 +47,19 @@ class TaskSpace(str, Enum):
 
     @property
     def dim(self) -> int:
-        """Number of position coordinates."""
+        """Return the number of position coordinates."""
         return 2 if self is TaskSpace.POINT2 else 3
 
     @property
     def has_orientation(self) -> bool:
-        """Whether a unit quaternion accompanies the position."""
+        """Tell whether a unit quaternion accompanies the position."""
         return self is TaskSpace.POSE3
 
 
 @dataclass(frozen=True)
 class TaskPoints:
-    """End-effector poses of a batch: positions ``(N, d)``, quaternions ``(N, 4)`` or None.
+    """
+    End-effector poses of a batch: positions ``(N, d)``, quaternions ``(N, 4)`` or None.
 
     Quaternions are ``(w, x, y, z)`` with ``w >= 0``.
     """
@@ -82,7 +83,7 @@ class Arm(ABC):
 
     @property
     def n_joints(self) -> int:
-        """Number of joints (the dimension of configuration space)."""
+        """Return the number of joints (the dimension of configuration space)."""
         return len(self.joint_names)
 
     @abstractmethod
@@ -99,7 +100,7 @@ class Arm(ABC):
         return batch
 
     def within_limits(self, configs: np.ndarray, tol: float = 1e-9) -> np.ndarray:
-        """Boolean mask of the configurations inside the position limits."""
+        """Return a boolean mask of the configurations inside the position limits."""
         batch = self.as_batch(configs)
         return np.all((batch >= self.lower - tol) & (batch <= self.upper + tol), axis=1)
 
@@ -109,7 +110,8 @@ class Arm(ABC):
 
 
 class PlanarArm(Arm):
-    """Planar chain of revolute joints; the task space is the 2-D tip point.
+    """
+    Planar chain of revolute joints; the task space is the 2-D tip point.
 
     Joint i turns link i relative to link i-1, so the tip is
     ``sum_i l_i (cos, sin)(q_1 + ... + q_i)``.
@@ -128,14 +130,15 @@ class PlanarArm(Arm):
         self.task_space = TaskSpace.POINT2
 
     def fk(self, configs: np.ndarray) -> TaskPoints:
-        """Tip points ``(N, 2)`` of the planar chain."""
+        """Return the tip points ``(N, 2)`` of the planar chain."""
         angles = np.cumsum(self.as_batch(configs), axis=1)
-        tip = np.stack([np.cos(angles) @ self.link_lengths,
-                        np.sin(angles) @ self.link_lengths], axis=1)
+        # an explicit row sum, not BLAS, so that a batch and a single row agree to the bit
+        tip = np.stack([(np.cos(angles) * self.link_lengths).sum(axis=1),
+                        (np.sin(angles) * self.link_lengths).sum(axis=1)], axis=1)
         return TaskPoints(tip)
 
     def link_points(self, config: np.ndarray) -> np.ndarray:
-        """Base, joint and tip points ``(n + 1, 2)`` of one configuration, for drawing."""
+        """Return base, joint and tip points ``(n + 1, 2)`` of one configuration, for drawing."""
         angles = np.cumsum(self.as_batch(config)[0])
         steps = self.link_lengths[:, None] * np.stack([np.cos(angles), np.sin(angles)], axis=1)
         return np.vstack([np.zeros(2), np.cumsum(steps, axis=0)])
@@ -143,7 +146,8 @@ class PlanarArm(Arm):
 
 @dataclass(frozen=True)
 class _Joint:
-    """One revolute joint: parent-frame offset, and rotation as constant matrices.
+    """
+    One revolute joint: parent-frame offset, and rotation as constant matrices.
 
     The child frame's rotation relative to the parent is ``A0 + cos(q) A1 + sin(q) A2``
     (origin rotation times Rodrigues' formula), stacked as ``basis = [A0 | A1 | A2]``.
@@ -156,13 +160,15 @@ class _Joint:
 def _revolute(origin_rotation: np.ndarray, origin_offset: np.ndarray, axis: np.ndarray) -> _Joint:
     axis = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
     outer = np.outer(axis, axis)
-    cross = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
+    cross = np.array([[0.0, -axis[2], axis[1]],
+                      [axis[2], 0.0, -axis[0]],
+                      [-axis[1], axis[0], 0.0]])
     parts = [origin_rotation @ m for m in (outer, np.eye(3) - outer, cross)]
     return _Joint(np.asarray(origin_offset, dtype=float), np.hstack(parts))
 
 
 def rotation_to_quaternion(rot: np.ndarray) -> np.ndarray:
-    """Unit quaternions ``(N, 4)`` as ``(w, x, y, z)``, ``w >= 0``, of rotations ``(N, 3, 3)``."""
+    """Convert rotations ``(N, 3, 3)`` to unit quaternions ``(w, x, y, z)``, ``w >= 0``."""
     rot = np.ascontiguousarray(rot, dtype=float).reshape(-1, 3, 3)
     quat = np.empty((len(rot), 4))
     quaternion_kernel(rot, quat)
@@ -195,7 +201,8 @@ class SerialChainArm(Arm):
         joints = []
         zero = pin.neutral(model)
         for jmodel, placement in zip(model.joints[1:], model.jointPlacements[1:]):
-            if jmodel.nq != 1 or not jmodel.shortname().startswith(('JointModelR', 'JointModelRevolute')):
+            revolute = jmodel.shortname().startswith(('JointModelR', 'JointModelRevolute'))
+            if jmodel.nq != 1 or not revolute:
                 raise ValueError(f'{urdf}: only revolute joints are supported, '
                                  f'found {jmodel.shortname()}')
             jdata = jmodel.createData()
@@ -213,7 +220,7 @@ class SerialChainArm(Arm):
                    np.array(model.velocityLimit), with_orientation)
 
     def tip_frames(self, configs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Tip positions ``(N, 3)`` and rotation matrices ``(N, 3, 3)``."""
+        """Return tip positions ``(N, 3)`` and rotation matrices ``(N, 3, 3)``."""
         batch = self.as_batch(configs)
         positions = np.empty((len(batch), 3))
         rotations = np.empty((len(batch), 3, 3))
@@ -222,7 +229,7 @@ class SerialChainArm(Arm):
         return positions, rotations
 
     def fk(self, configs: np.ndarray) -> TaskPoints:
-        """Tip positions, with quaternions when the task space has orientation."""
+        """Return tip positions, with quaternions when the task space has orientation."""
         positions, rotations = self.tip_frames(configs)
         if self.task_space.has_orientation:
             return TaskPoints(positions, rotation_to_quaternion(rotations))

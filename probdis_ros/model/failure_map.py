@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""The failure map: blocked movements and the failure probability they imply.
+"""
+The failure map: blocked movements and the failure probability they imply.
 
 A failure ``f = (x_fail, v_fail, q_fail)`` records where the arm was blocked (task-space
 point), the task-space direction it was moving in, and, where orientation is modelled, the
@@ -41,7 +42,6 @@ from pathlib import Path
 import tempfile
 
 import numpy as np
-
 from probdis_ros.model.arms import TaskPoints, TaskSpace
 
 FORMAT = 'probdis-failure-map'
@@ -53,6 +53,15 @@ DEFAULT_C_FAIL = 100.0
 
 class FailureMapError(ValueError):
     """A failure map file or failure that cannot be used, with the reason."""
+
+
+def _unit(vector: np.ndarray, norm: float) -> np.ndarray:
+    """
+    Scale to unit length, keeping a unit vector bit for bit.
+
+    So a saved and reloaded map is identical to the original.
+    """
+    return vector if abs(norm - 1.0) < 1e-12 else vector / norm
 
 
 class FailureMap:
@@ -89,11 +98,11 @@ class FailureMap:
             norm = np.linalg.norm(q)
             if q.shape != (4,) or not (np.isfinite(norm) and norm > 0):
                 raise FailureMapError('q must be a nonzero quaternion (w, x, y, z)')
-            q = q / norm
+            q = _unit(q, norm)
         else:
             q = np.array([1.0, 0.0, 0.0, 0.0])
         self.points = np.vstack([self.points, x])
-        self.directions = np.vstack([self.directions, v / speed])
+        self.directions = np.vstack([self.directions, _unit(v, speed)])
         self.orientations = np.vstack([self.orientations, q])
 
     def clear(self) -> None:
@@ -124,7 +133,7 @@ class FailureMap:
     # -- files -------------------------------------------------------------------------
 
     def to_dict(self) -> dict:
-        """The map as the JSON document of the file format."""
+        """Return the map as the JSON document of the file format."""
         with_q = self.task_space.has_orientation
         return {
             'format': FORMAT, 'version': VERSION, 'task_space': self.task_space.value,
@@ -161,7 +170,8 @@ class FailureMap:
         try:
             task_space = TaskSpace(doc.get('task_space'))
         except ValueError:
-            raise FailureMapError(f'{source}: unknown task_space {doc.get("task_space")!r}')
+            raise FailureMapError(
+                f'{source}: unknown task_space {doc.get("task_space")!r}') from None
         c_fail = doc.get('c_fail')
         if not isinstance(c_fail, (int, float)) or isinstance(c_fail, bool):
             raise FailureMapError(f'{source}: c_fail must be a number')

@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Compiled inner loops (numba) of the ROS-free core.
+"""
+Compiled inner loops (numba) of the ROS-free core.
 
 Kept apart so that the Python modules stay readable and each kernel has one job.  Kernels
 take plain arrays and write into preallocated outputs; ``cache=True`` keeps the compiled code
@@ -26,7 +27,8 @@ import numpy as np
 @numba.njit(cache=True)
 def chain_kernel(q: np.ndarray, offsets: np.ndarray, bases: np.ndarray, tip_offset: np.ndarray,
                  tip_rotation: np.ndarray, pos_out: np.ndarray, rot_out: np.ndarray) -> None:
-    """Forward kinematics of a revolute chain for every row of q.
+    """
+    Forward kinematics of a revolute chain for every row of q.
 
     Joint j moves its child frame by ``offsets[j]`` in the parent frame and rotates it by
     ``bases[j, 0] + cos(q_j) bases[j, 1] + sin(q_j) bases[j, 2]`` (each 3x3).  The rotation
@@ -78,7 +80,8 @@ def chain_kernel(q: np.ndarray, offsets: np.ndarray, bases: np.ndarray, tip_offs
 
 @numba.njit(cache=True)
 def quaternion_kernel(rot: np.ndarray, quat_out: np.ndarray) -> None:
-    """Unit quaternions ``(w, x, y, z)`` with ``w >= 0`` of rotation matrices ``(N, 3, 3)``.
+    """
+    Write unit quaternions ``(w, x, y, z)``, ``w >= 0``, of rotation matrices ``(N, 3, 3)``.
 
     Each component's magnitude comes from the diagonal and its sign from the off-diagonal
     differences, which is accurate everywhere without branching on the largest component.

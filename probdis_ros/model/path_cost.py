@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Cost and success probability of joint-space edges and paths under a failure map.
+"""
+Cost and success probability of joint-space edges and paths under a failure map.
 
 The paper writes path failure as a product of point probabilities, which would make longer
 paths look safer.  What it means, and what DESIGN.md fixes, is the product integral of the
@@ -31,10 +32,10 @@ a large finite amount instead of infinity.
 
 from __future__ import annotations
 
+from itertools import pairwise
 import math
 
 import numpy as np
-
 from probdis_ros.model.arms import Arm
 from probdis_ros.model.failure_map import FailureMap
 
@@ -48,7 +49,7 @@ P_MAX = 1.0 - 1e-9
 
 def edge_points(start: np.ndarray, end: np.ndarray,
                 delta: float = DEFAULT_DELTA) -> tuple[np.ndarray, float]:
-    """Points at the end of each of the ``ceil(L / delta)`` equal steps, and the step length."""
+    """Return the ends of the ``ceil(L / delta)`` equal steps of an edge, and the step length."""
     start = np.asarray(start, dtype=float)
     end = np.asarray(end, dtype=float)
     length = float(np.linalg.norm(end - start))
@@ -60,7 +61,7 @@ def edge_points(start: np.ndarray, end: np.ndarray,
 
 
 def risk(probabilities: np.ndarray, step: float, delta: float = DEFAULT_DELTA) -> float:
-    """``-sum (step / delta) log(1 - p)``: minus the log success probability of the steps."""
+    """Return ``-sum (step / delta) log(1 - p)``, minus the log success probability."""
     p = np.minimum(np.asarray(probabilities, dtype=float), P_MAX)
     return float(-(step / delta) * np.log1p(-p).sum())
 
@@ -68,7 +69,7 @@ def risk(probabilities: np.ndarray, step: float, delta: float = DEFAULT_DELTA) -
 def edge_cost(arm: Arm, fmap: FailureMap, start: np.ndarray, end: np.ndarray,
               delta: float = DEFAULT_DELTA,
               length_weight: float = DEFAULT_LENGTH_WEIGHT) -> float:
-    """Additive cost of the straight joint-space edge from start to end."""
+    """Return the additive cost of the straight joint-space edge from start to end."""
     points, step = edge_points(start, end, delta)
     length = step * len(points)
     if len(points) == 0:
@@ -78,18 +79,18 @@ def edge_cost(arm: Arm, fmap: FailureMap, start: np.ndarray, end: np.ndarray,
 
 def path_cost(arm: Arm, fmap: FailureMap, path: np.ndarray, delta: float = DEFAULT_DELTA,
               length_weight: float = DEFAULT_LENGTH_WEIGHT) -> float:
-    """Sum of the edge costs along the via points of path ``(M, n_joints)``."""
+    """Return the sum of the edge costs along the via points of path ``(M, n_joints)``."""
     path = arm.as_batch(path)
-    return sum(edge_cost(arm, fmap, a, b, delta, length_weight) for a, b in zip(path, path[1:]))
+    return sum(edge_cost(arm, fmap, a, b, delta, length_weight) for a, b in pairwise(path))
 
 
 def path_length(path: np.ndarray) -> float:
-    """Joint-space (Euclidean) length of a polyline of configurations."""
+    """Return the joint-space (Euclidean) length of a polyline of configurations."""
     path = np.atleast_2d(np.asarray(path, dtype=float))
     return float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum())
 
 
 def path_success_probability(arm: Arm, fmap: FailureMap, path: np.ndarray,
                              delta: float = DEFAULT_DELTA) -> float:
-    """Probability that the whole path executes without being blocked."""
+    """Return the probability that the whole path executes without being blocked."""
     return math.exp(-path_cost(arm, fmap, path, delta, length_weight=0.0))

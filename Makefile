@@ -1,0 +1,55 @@
+# probdis_ros: `make demo` and `make test` work on a fresh clone (see README).
+# Both create .venv with a Python the ROS 2 Jazzy wheels exist for (3.10-3.12), install the
+# pinned requirements (.ci/requirements/) and the package (editable), then run.
+
+SHELL := /bin/bash
+VENV ?= .venv
+PY := $(VENV)/bin/python
+REQUIREMENTS := .ci/requirements/pypi.txt .ci/requirements/test.txt
+STAMP := $(VENV)/.probdis-installed
+OUT ?= out
+
+# Every run stays on this machine: discovery on loopback only, a domain of its own, logs in
+# the build tree.
+export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
+export ROS_DOMAIN_ID ?= $(shell echo $$(( $$$$ % 90 + 10 )))
+export ROS_LOG_DIR ?= $(CURDIR)/build/ros_log
+
+# The first interpreter on PATH that the ROS wheels support; override with PYTHON=...
+PYTHON ?= $(firstword $(foreach p,python3.11 python3.12 python3.10 python3,\
+  $(shell $(p) -c 'import sys; sys.exit(not (3, 10) <= sys.version_info[:2] <= (3, 12))' \
+  >/dev/null 2>&1 && echo $(p))))
+
+.PHONY: venv demo test lint bench clean
+
+venv: $(STAMP)
+
+$(STAMP): $(REQUIREMENTS) setup.py package.xml
+	@if [ -z "$(PYTHON)" ]; then \
+	  echo "make: no Python 3.10-3.12 found on PATH; the ROS 2 Jazzy wheels need one of" \
+	       "those (e.g. apt-get install python3.11, or make PYTHON=/path/to/python3.11)" >&2; \
+	  exit 1; fi
+	@echo "== creating $(VENV) with $(PYTHON) ($$($(PYTHON) --version))"
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --disable-pip-version-check $(addprefix -r ,$(REQUIREMENTS))
+	$(PY) -m pip install --quiet --disable-pip-version-check --no-deps --no-build-isolation -e .
+	@touch $(STAMP)
+
+demo: venv
+	@mkdir -p $(OUT)
+	$(VENV)/bin/probdis info
+	$(VENV)/bin/probdis fk 0 0.5 0 -1 0 0.5 0
+	$(VENV)/bin/probdis map plot --out $(OUT)/failure_map.png
+	$(VENV)/bin/probdis bench fk
+
+lint: venv
+	$(PY) -m ruff check probdis_ros test setup.py
+
+test: lint
+	$(PY) -m pytest test
+
+bench: venv
+	$(VENV)/bin/probdis bench fk
+
+clean:
+	rm -rf build install log $(OUT) .pytest_cache .ruff_cache

@@ -1,0 +1,135 @@
+# Copyright 2026 probdis_ros contributors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""Forward kinematics: compiled chain against pinocchio and yourdfpy, planar arm by hand."""
+
+import numpy as np
+import pinocchio as pin
+from probdis_ros.model import arm_for_setting, iiwa_arm, PlanarArm
+from probdis_ros.model.arms import rotation_to_quaternion
+from probdis_ros.resources import data_file
+import pytest
+import yourdfpy
+
+URDF = data_file('urdf', 'iiwa14.urdf')
+
+
+def random_configs(arm, n, seed=0):
+    return arm.random_configurations(np.random.default_rng(seed), n)
+
+
+def same_rotation(q1, q2):
+    """Quaternions q and -q are the same rotation."""
+    return min(np.abs(q1 - q2).max(), np.abs(q1 + q2).max())
+
+
+def test_urdf_joints_and_limits_match_the_iiwa14_datasheet():
+    arm = iiwa_arm()
+    assert arm.joint_names == tuple(f'lbr_A{i}' for i in range(1, 8))
+    deg = [170, 120, 170, 120, 170, 120, 175]
+    np.testing.assert_allclose(arm.upper, np.radians(deg), atol=1e-6)
+    np.testing.assert_allclose(arm.lower, -np.radians(deg), atol=1e-6)
+    np.testing.assert_allclose(arm.velocity_limits, np.radians([85, 85, 100, 75, 130, 135, 135]),
+                               atol=1e-6)
+
+
+def test_zero_configuration_is_the_arm_straight_up():
+    pose = iiwa_arm().fk(np.zeros(7))
+    np.testing.assert_allclose(pose.positions[0], [0, 0, 0.36 + 0.42 + 0.40 + 0.126], atol=1e-12)
+    np.testing.assert_allclose(pose.orientations[0], [1, 0, 0, 0], atol=1e-12)
+
+
+def test_flange_pose_matches_pinocchio_at_random_configurations():
+    arm = iiwa_arm()
+    configs = random_configs(arm, 200, seed=1)
+    pose = arm.fk(configs)
+    model = pin.buildModelFromUrdf(str(URDF))
+    data = model.createData()
+    frame = model.getFrameId('lbr_link_ee')
+    for q, x, quat in zip(configs, pose.positions, pose.orientations):
+        pin.framesForwardKinematics(model, data, q)
+        placement = data.oMf[frame]
+        np.testing.assert_allclose(x, placement.translation, atol=1e-12)
+        xyzw = pin.Quaternion(placement.rotation).coeffs()
+        assert same_rotation(quat, np.r_[xyzw[3], xyzw[:3]]) < 1e-9
+
+
+def test_pinocchio_and_yourdfpy_agree_on_the_urdf():
+    robot = yourdfpy.URDF.load(str(URDF), load_meshes=False, build_collision_scene_graph=False)
+    assert robot.actuated_joint_names == list(iiwa_arm().joint_names)
+    model = pin.buildModelFromUrdf(str(URDF))
+    data = model.createData()
+    frame = model.getFrameId('lbr_link_ee')
+    for q in random_configs(iiwa_arm(), 50, seed=2):
+        robot.update_cfg(q)
+        pin.framesForwardKinematics(model, data, q)
+        np.testing.assert_allclose(robot.get_transform('lbr_link_ee', 'lbr_link_0'),
+                                   data.oMf[frame].homogeneous, atol=1e-12)
+
+
+def test_batch_equals_loop():
+    for setting in ('2d', '3d', '3d-orient'):
+        arm = arm_for_setting(setting)
+        configs = random_configs(arm, 64, seed=3)
+        batch = arm.fk(configs)
+        for i, q in enumerate(configs):
+            one = arm.fk(q)
+            np.testing.assert_array_equal(one.positions[0], batch.positions[i])
+            if batch.orientations is not None:
+                np.testing.assert_array_equal(one.orientations[0], batch.orientations[i])
+
+
+def test_task_spaces_of_the_three_settings():
+    assert arm_for_setting('2d').fk(np.zeros(7)).positions.shape == (1, 2)
+    assert arm_for_setting('3d').fk(np.zeros(7)).orientations is None
+    assert arm_for_setting('3d-orient').fk(np.zeros((5, 7))).orientations.shape == (5, 4)
+    with pytest.raises(ValueError, match='unknown setting'):
+        arm_for_setting('4d')
+
+
+def test_planar_arm_by_hand():
+    arm = PlanarArm(link_lengths=(0.1,) * 7)
+    q = np.array([np.pi / 2, -np.pi / 2, 0, 0, 0, 0, np.pi / 2])
+    # link 1 points up (0, 0.1); links 2-6 point right (0.5, 0); link 7 points up (0, 0.1)
+    np.testing.assert_allclose(arm.fk(q).positions[0], [0.5, 0.2], atol=1e-12)
+    np.testing.assert_allclose(arm.fk(np.zeros(7)).positions[0], [0.7, 0.0], atol=1e-12)
+    np.testing.assert_allclose(arm.link_points(q)[-1], [0.5, 0.2], atol=1e-12)
+
+
+def test_wrong_joint_count_is_refused_with_a_clear_message():
+    with pytest.raises(ValueError, match='expected configurations with 7 joints'):
+        iiwa_arm().fk(np.zeros(6))
+
+
+def test_limits_mask_and_random_configurations_stay_inside():
+    arm = iiwa_arm()
+    configs = random_configs(arm, 1000, seed=4)
+    assert arm.within_limits(configs).all()
+    outside = configs[:3].copy()
+    outside[:, 1] = arm.upper[1] + 0.01
+    assert not arm.within_limits(outside).any()
+
+
+def test_quaternions_are_unit_with_nonnegative_w():
+    quats = iiwa_arm().fk(random_configs(iiwa_arm(), 500, seed=5)).orientations
+    np.testing.assert_allclose(np.linalg.norm(quats, axis=1), 1.0, atol=1e-12)
+    assert (quats[:, 0] >= 0).all()
+
+
+def test_rotation_to_quaternion_near_half_turns():
+    # rotations by pi about x, y and z: w = 0 and the sign must come out consistent
+    for axis in np.eye(3):
+        rot = 2 * np.outer(axis, axis) - np.eye(3)
+        quat = rotation_to_quaternion(rot[None])[0]
+        assert same_rotation(quat, np.r_[0.0, axis]) < 1e-12

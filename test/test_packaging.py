@@ -1,0 +1,99 @@
+# Copyright 2026 probdis_ros contributors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The package installs three ways and finds its config and URDF in each.
+
+colcon build (as on a ROS machine), ``pip install .`` and the editable install that
+``make`` uses.  Each runs the real installed ``probdis`` executable.
+"""
+
+import json
+import os
+from pathlib import Path
+import subprocess
+import sys
+import sysconfig
+
+from catkin_pkg.package import parse_package
+from conftest import copy_source_tree, ROOT, run_probdis
+import probdis_ros
+import pytest
+
+BIN = Path(sys.executable).parent
+
+
+def test_package_xml_declares_every_dependency():
+    package = parse_package(str(ROOT / 'package.xml'))
+    assert package.package_format == 3 and package.name == 'probdis_ros'
+    assert package.get_build_type() == 'ament_python'
+    run = {d.name for d in package.exec_depends}
+    for key in ('rclpy', 'sensor_msgs', 'trajectory_msgs', 'std_msgs', 'std_srvs',
+                'visualization_msgs', 'diagnostic_msgs', 'python3-numpy', 'python3-pin-pip',
+                'python3-yourdfpy-pip', 'python3-rosbags-pip'):
+        assert key in run, key
+    tests = {d.name for d in package.test_depends}
+    assert {'ament_copyright', 'ament_flake8', 'ament_pep257', 'python3-pytest'} <= tests
+
+
+def test_colcon_build_installs_the_executable_and_the_share_files(tmp_path):
+    source = copy_source_tree(tmp_path / 'src' / 'probdis_ros')
+    build = subprocess.run(
+        [str(BIN / 'colcon'), 'build', '--base-paths', str(source.parent)],
+        cwd=tmp_path, capture_output=True, text=True, timeout=600)
+    assert build.returncode == 0, build.stdout + build.stderr
+    install = tmp_path / 'install'
+    exe = install / 'probdis_ros' / 'lib' / 'probdis_ros' / 'probdis'
+    assert exe.exists()
+    share = install / 'probdis_ros' / 'share' / 'probdis_ros'
+    assert (share / 'urdf' / 'iiwa14.urdf').exists()
+    assert (share / 'config' / 'planner.yaml').exists()
+    script = f'source {install}/setup.bash && {exe} --help >/dev/null && {exe} info --json'
+    env = {k: v for k, v in os.environ.items() if k not in ('AMENT_PREFIX_PATH', 'PYTHONPATH')}
+    run = subprocess.run(['bash', '-c', script], capture_output=True, text=True, timeout=120,
+                         env=env)
+    assert run.returncode == 0, run.stdout + run.stderr
+    info = json.loads(run.stdout)
+    assert info['found_by'] == 'ament index'
+    assert Path(info['share']) == share
+
+
+def test_pip_install_puts_data_files_under_the_prefix(tmp_path):
+    source = copy_source_tree(tmp_path / 'src')
+    venv = tmp_path / 'venv'
+    subprocess.run([sys._base_executable, '-m', 'venv', '--without-pip', str(venv)], check=True)
+    site = Path(sysconfig.get_path('purelib', vars={'base': str(venv), 'platbase': str(venv)}))
+    # the new environment borrows this one's libraries (numpy, pinocchio, ...), not its code
+    here = sysconfig.get_path('purelib')
+    (site / 'borrow.pth').write_text(f'import site; site.addsitedir({here!r})\n')
+    install = subprocess.run(
+        [sys.executable, '-m', 'pip', '--python', str(venv / 'bin' / 'python'), 'install',
+         '--quiet', '--no-deps', '--no-build-isolation', str(source)],
+        capture_output=True, text=True, timeout=600)
+    assert install.returncode == 0, install.stdout + install.stderr
+    env = {k: v for k, v in os.environ.items() if k not in ('AMENT_PREFIX_PATH', 'PYTHONPATH')}
+    run = subprocess.run([str(venv / 'bin' / 'probdis'), 'info', '--json'], capture_output=True,
+                         text=True, timeout=120, env=env, cwd=tmp_path)
+    assert run.returncode == 0, run.stdout + run.stderr
+    info = json.loads(run.stdout)
+    assert info['found_by'] == 'python prefix'
+    assert Path(info['share']) == venv / 'share' / 'probdis_ros'
+    assert Path(info['urdf']).exists()
+
+
+@pytest.mark.skipif(Path(probdis_ros.__file__).resolve().parent.parent != ROOT,
+                    reason='the package under test is not the editable install of this tree')
+def test_editable_install_reads_the_source_tree():
+    info = json.loads(run_probdis('info', '--json').stdout)
+    assert info['found_by'] == 'source tree' and Path(info['share']) == ROOT
