@@ -95,5 +95,6 @@ def test_pip_install_puts_data_files_under_the_prefix(tmp_path):
 @pytest.mark.skipif(Path(probdis_ros.__file__).resolve().parent.parent != ROOT,
                     reason='the package under test is not the editable install of this tree')
 def test_editable_install_reads_the_source_tree():
+    assert (BIN / 'probdis').exists(), 'the editable install must put probdis next to python'
     info = json.loads(run_probdis('info', '--json').stdout)
     assert info['found_by'] == 'source tree' and Path(info['share']) == ROOT
