@@ -35,12 +35,10 @@ $(STAMP): $(REQUIREMENTS) setup.py package.xml
 	$(PY) -m pip install --quiet --disable-pip-version-check --no-deps --no-build-isolation --use-pep517 -e .
 	@touch $(STAMP)
 
+# Until the ROS nodes exist: a simulated disentangling of the shipped 2-D scenario.
 demo: venv
 	@mkdir -p $(OUT)
-	$(VENV)/bin/probdis info
-	$(VENV)/bin/probdis fk 0 0.5 0 -1 0 0.5 0
-	$(VENV)/bin/probdis map plot --out $(OUT)/failure_map.png
-	$(VENV)/bin/probdis bench fk
+	$(VENV)/bin/probdis sim --scenario demo_2d --plot $(OUT)/demo_2d.png
 
 lint: venv
 	$(PY) -m ruff check probdis_ros test setup.py
@@ -50,6 +48,7 @@ test: lint
 
 bench: venv
 	$(VENV)/bin/probdis bench fk
+	$(VENV)/bin/probdis bench plan
 
 clean:
 	rm -rf build install log $(OUT) .pytest_cache .ruff_cache

@@ -58,3 +58,58 @@ def bench_fk(setting: str = '3d-orient', configs: int = 200_000, repeats: int = 
         rates.append(configs / (time.perf_counter() - start))
     return {'configs_per_s': statistics.median(rates), 'setting': setting,
             'configs': configs, 'repeats': repeats, 'machine': machine()}
+
+
+def nineteen_failure_map(seed: int = 0):
+    """
+    Return (start, goal, map) with 19 failures learned in a real simulated episode.
+
+    The Epsilon method (fast: no planning) runs in a seeded 3-D world with orientation and 90
+    hidden obstacles until 19 blocks are recorded; start is where the arm then is.
+    """
+    from probdis_ros.model import FailureMap
+    from probdis_ros.planning import Disentangler, EpsilonPlanner
+    from probdis_ros.sim.worlds import random_world
+
+    for world_seed in range(seed, seed + 100):
+        world = random_world('3d-orient', 90, world_seed)
+        sim = world.compliant_arm()
+        loop = Disentangler(world.arm, EpsilonPlanner(world.arm, 0.2),
+                            world.goal, FailureMap(world.arm.task_space), max_paths=200,
+                            seed=world_seed)
+        current = world.start
+        while len(loop.fmap) < 19:
+            path = loop.next_path(current)
+            if path is None:
+                break
+            run = sim.execute(path)
+            current = run.config
+            if run.blocked:
+                current = sim.execute(loop.report_blocked(current, run.segment)).config
+                loop.report_retreated(current)
+            else:
+                loop.report_completed(current)
+        if len(loop.fmap) == 19:
+            return current, world.goal, loop.fmap
+    raise RuntimeError('no episode produced 19 failures')
+
+
+def bench_plan(seeds: int = 20) -> dict:
+    """Median ProbRRT planning time (paper parameters, iiwa with orientation, one thread)."""
+    from probdis_ros.model import FailureMap
+    from probdis_ros.planning import ProbRRT
+
+    start, goal, fmap = nineteen_failure_map()
+    arm = arm_for_setting('3d-orient')
+    planner = ProbRRT(arm)
+    planner.plan(start, goal, fmap, np.random.default_rng(0))   # compile the kernels
+    result = {'machine': machine(), 'seeds': seeds}
+    for key, the_map in (('median_s_empty_map', FailureMap(arm.task_space)),
+                         ('median_s_19_failures', fmap)):
+        times = []
+        for seed in range(seeds):
+            t0 = time.perf_counter()
+            planner.plan(start, goal, the_map, np.random.default_rng(seed))
+            times.append(time.perf_counter() - t0)
+        result[key] = statistics.median(times)
+    return result

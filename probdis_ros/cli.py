@@ -26,6 +26,7 @@ import json
 import sys
 
 SETTINGS = ('2d', '3d', '3d-orient')
+DEFAULT_C_FAIL = 100.0   # the model's default (probdis_ros.model.failure_map), without its imports
 
 
 class UsageError(Exception):
@@ -106,6 +107,82 @@ def cmd_map_plot(args: argparse.Namespace) -> int:
     return 0
 
 
+def _load_scenario(name: str):
+    """Return the world of a scenario file path, or of a name in config/scenarios/."""
+    from pathlib import Path
+
+    from probdis_ros.resources import share_dir
+    from probdis_ros.sim.worlds import load_world
+
+    path = Path(name)
+    if not path.exists() and path.suffix == '' and len(path.parts) == 1:
+        shipped = share_dir()[1] / 'config' / 'scenarios' / f'{name}.yaml'
+        if shipped.exists():
+            path = shipped
+    return load_world(path)
+
+
+def cmd_sim(args: argparse.Namespace) -> int:
+    """Run one simulated disentangling episode."""
+    import statistics
+
+    from probdis_ros.planning import RRTSettings
+    from probdis_ros.sim.episode import run_episode
+    from probdis_ros.sim.worlds import random_world
+
+    if args.scenario and args.seed is not None:
+        raise UsageError('give either --scenario or --seed, not both')
+    if args.scenario:
+        world = _load_scenario(args.scenario)
+        if args.setting and args.setting != world.setting:
+            raise UsageError(f'--setting {args.setting} does not match the scenario '
+                             f'({world.setting})')
+    else:
+        world = random_world(args.setting or '2d', args.obstacles, args.seed or 0)
+    if args.plot and world.setting != '2d':
+        raise UsageError('--plot draws 2-D episodes; use --setting 2d')
+    seed = args.seed or 0
+    result = run_episode(world, args.method, seed=seed, max_paths=args.max_paths,
+                         threshold=args.threshold, epsilon=args.epsilon,
+                         settings=RRTSettings(), c_fail=args.c_fail)
+    if args.plot:
+        from probdis_ros.plots import plot_episode
+
+        plot_episode(result, args.plot)
+    if args.json:
+        _print_json(result.summary())
+        return 0
+    outcome = 'disentangled' if result.success else 'NOT disentangled'
+    times = result.plan_times_s
+    print(f'{world.name or args.scenario}: {args.method}: {outcome} after {result.paths} '
+          f'path(s), {result.failures} failure(s) learned')
+    if times:
+        print(f'planning time per path: median {statistics.median(times):.3f} s, '
+              f'max {max(times):.3f} s')
+    if world.rejected_draws:
+        print(f'(world drawn after {world.rejected_draws} rejected unsolvable draws)')
+    if args.plot:
+        print(f'wrote {args.plot}')
+    return 0
+
+
+def cmd_bench_plan(args: argparse.Namespace) -> int:
+    """Time ProbRRT on the iiwa with orientation, empty map and 19 failures."""
+    from probdis_ros.bench import bench_plan
+
+    result = bench_plan(args.seeds)
+    if args.json:
+        _print_json({'median_s_empty_map': result['median_s_empty_map'],
+                     'median_s_19_failures': result['median_s_19_failures']})
+    else:
+        print(f'ProbRRT plan, iiwa with orientation, paper parameters, one thread, '
+              f'median of {args.seeds} seeds:')
+        print(f'  empty map:    {result["median_s_empty_map"]:.3f} s')
+        print(f'  19 failures:  {result["median_s_19_failures"]:.3f} s')
+        print(f'machine: {result["machine"]}')
+    return 0
+
+
 def _positive_int(text: str) -> int:
     value = int(text)
     if value < 1:
@@ -140,12 +217,38 @@ def build_parser() -> argparse.ArgumentParser:
     bfk.add_argument('--json', action='store_true', help='print {"configs_per_s": float}')
     bfk.set_defaults(handler=cmd_bench_fk)
 
+    bplan = bench_sub.add_parser('plan', help='ProbRRT planning time, empty map and 19 failures')
+    bplan.add_argument('--seeds', type=_positive_int, default=20, help='plans per map')
+    bplan.add_argument('--json', action='store_true',
+                       help='print {"median_s_empty_map": float, "median_s_19_failures": float}')
+    bplan.set_defaults(handler=cmd_bench_plan)
+
+    from probdis_ros.planning import DEFAULT_EPSILON, DEFAULT_THRESHOLD, METHODS
+
+    sim = sub.add_parser('sim', help='one simulated disentangling episode')
+    sim.add_argument('--setting', choices=SETTINGS, help='2d, 3d or 3d-orient (default 2d)')
+    sim.add_argument('--obstacles', type=_positive_int, default=10,
+                     help='hidden obstacles of a random world')
+    sim.add_argument('--method', choices=METHODS, default='probabilistic')
+    sim.add_argument('--threshold', type=float, default=DEFAULT_THRESHOLD,
+                     help='Y of the hard method')
+    sim.add_argument('--epsilon', type=float, default=DEFAULT_EPSILON,
+                     help='X of the epsilon method')
+    sim.add_argument('--seed', type=int, help='random world and planner seed (default 0)')
+    sim.add_argument('--scenario', help='a scenario YAML file, or the name of one in '
+                     'config/scenarios/')
+    sim.add_argument('--max-paths', type=_positive_int, default=20, help='N_ITER')
+    sim.add_argument('--c-fail', type=float, default=DEFAULT_C_FAIL, help='C_FAIL [1/m^2]')
+    sim.add_argument('--json', action='store_true', help='print one JSON object')
+    sim.add_argument('--plot', metavar='OUT.png', help='draw the (2-D) episode')
+    sim.set_defaults(handler=cmd_sim)
+
     fmap = sub.add_parser('map', help='failure maps')
     map_sub = fmap.add_subparsers(dest='map_command', required=True, metavar='ACTION')
     plot = map_sub.add_parser('plot', help='draw a 2-D probability map as a PNG')
     plot.add_argument('--map', help='a 2-D failure map file (default: an example map)')
     plot.add_argument('--out', default='failure_map.png', help='PNG to write')
-    plot.add_argument('--c-fail', type=float, default=100.0,
+    plot.add_argument('--c-fail', type=float, default=DEFAULT_C_FAIL,
                       help='C_FAIL of the example map [1/m^2]')
     plot.add_argument('--extent', type=float, nargs=4, metavar=('X0', 'X1', 'Y0', 'Y1'))
     plot.set_defaults(handler=cmd_map_plot)
@@ -158,10 +261,11 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     handler: Callable[[argparse.Namespace], int] = args.handler
     from probdis_ros.model import FailureMapError
+    from probdis_ros.sim.worlds import ScenarioError
 
     try:
         return handler(args)
-    except (UsageError, FailureMapError, FileNotFoundError, ValueError) as err:
+    except (UsageError, FailureMapError, ScenarioError, FileNotFoundError, ValueError) as err:
         print(f'probdis: error: {err}', file=sys.stderr)
         return 2
     except KeyboardInterrupt:

@@ -88,3 +88,62 @@ def plot_map(fmap: FailureMap, out: str | Path,
     fig.savefig(out, dpi=120, bbox_inches='tight')
     plt.close(fig)
     return out
+
+
+def plot_episode(result, out: str | Path) -> Path:
+    """
+    Draw a 2-D episode like the paper's Fig. 2.
+
+    The arm at start (grey) and goal (green), the end-effector traces of the executed paths
+    (blue, the last one darkest), the planned path of the last attempt (dashed), failures
+    (red), the final probability map (dark = likely blocked) and the hidden obstacles
+    (black outlines, for the viewer only).
+    """
+    world = result.world
+    if world.setting != '2d':
+        raise ValueError(f'--plot draws 2-D episodes; this one is {world.setting}')
+    import matplotlib
+    matplotlib.use('Agg')
+    from matplotlib.patches import Circle
+    import matplotlib.pyplot as plt
+
+    arm = world.arm
+    reach = float(arm.link_lengths.sum())
+    extent = (-reach, reach, -reach, reach)
+    fig, ax = plt.subplots(figsize=(6.5, 6))
+    grid = probability_grid(result.loop.fmap, extent, resolution=240)
+    ax.imshow(grid, origin='lower', extent=extent, cmap='gray_r', vmin=0.0, vmax=1.0)
+    for obstacle in world.obstacles:
+        ax.add_patch(Circle(obstacle.center, obstacle.radius, fill=False, color='black', lw=1.2))
+    for k, trace in enumerate(result.traces):
+        xy = arm.fk(trace).positions
+        alpha = 0.25 + 0.75 * (k + 1) / len(result.traces)
+        ax.plot(xy[:, 0], xy[:, 1], color='tab:blue', alpha=alpha, lw=1.5)
+    if result.loop.attempts:
+        planned = arm.fk(_dense(result.loop.attempts[-1].path)).positions
+        ax.plot(planned[:, 0], planned[:, 1], '--', color='tab:blue', lw=1, label='last plan')
+    arms = ((world.start, 'grey', 'start'), (world.goal, 'tab:green', 'goal'))
+    for config, color, label in arms:
+        links = arm.link_points(config)
+        ax.plot(links[:, 0], links[:, 1], '-o', color=color, lw=2, ms=3, label=label)
+    fmap = result.loop.fmap
+    if len(fmap):
+        ax.plot(fmap.points[:, 0], fmap.points[:, 1], 'o', color='tab:red', ms=4,
+                label='failures')
+    outcome = 'success' if result.success else 'not disentangled'
+    ax.set_title(f'{world.name or "2-D episode"}: {outcome} after {result.paths} paths')
+    ax.set_xlim(extent[:2])
+    ax.set_ylim(extent[2:])
+    ax.set_aspect('equal')
+    ax.legend(loc='lower left', fontsize=8)
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=120, bbox_inches='tight')
+    plt.close(fig)
+    return out
+
+
+def _dense(path: np.ndarray, step: float = 0.02) -> np.ndarray:
+    from probdis_ros.sim.compliant_arm import densify
+
+    return densify(np.asarray(path), step)[0]

@@ -35,7 +35,7 @@ from enum import Enum
 from pathlib import Path
 
 import numpy as np
-from probdis_ros.model.kernels import chain_kernel, quaternion_kernel
+from probdis_ros.model.kernels import CHAIN, chain_kernel, PLANAR, quaternion_kernel
 
 
 class TaskSpace(str, Enum):
@@ -108,6 +108,10 @@ class Arm(ABC):
         """Draw n configurations uniformly within the position limits."""
         return rng.uniform(self.lower, self.upper, size=(n, self.n_joints))
 
+    @abstractmethod
+    def kernel_params(self) -> tuple:
+        """Return the arm as the plain arrays the compiled edge kernels take."""
+
 
 class PlanarArm(Arm):
     """
@@ -137,6 +141,11 @@ class PlanarArm(Arm):
                         (np.sin(angles) * self.link_lengths).sum(axis=1)], axis=1)
         return TaskPoints(tip)
 
+    def kernel_params(self) -> tuple:
+        """Return ``(PLANAR, link_lengths, <unused chain arrays>)`` for the edge kernels."""
+        return (PLANAR, self.link_lengths, np.zeros((0, 3)), np.zeros((0, 3, 3, 3)),
+                np.zeros(3), np.eye(3))
+
     def link_points(self, config: np.ndarray) -> np.ndarray:
         """Return base, joint and tip points ``(n + 1, 2)`` of one configuration, for drawing."""
         angles = np.cumsum(self.as_batch(config)[0])
@@ -165,6 +174,16 @@ def _revolute(origin_rotation: np.ndarray, origin_offset: np.ndarray, axis: np.n
                       [-axis[1], axis[0], 0.0]])
     parts = [origin_rotation @ m for m in (outer, np.eye(3) - outer, cross)]
     return _Joint(np.asarray(origin_offset, dtype=float), np.hstack(parts))
+
+
+def quaternion_to_rotation(quat: np.ndarray) -> np.ndarray:
+    """Convert unit quaternions ``(N, 4)`` ``(w, x, y, z)`` to rotation matrices ``(N, 3, 3)``."""
+    w, x, y, z = np.asarray(quat, dtype=float).reshape(-1, 4).T
+    return np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], axis=1),
+        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], axis=1),
+        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=1),
+    ], axis=1)
 
 
 def rotation_to_quaternion(rot: np.ndarray) -> np.ndarray:
@@ -218,6 +237,11 @@ class SerialChainArm(Arm):
                    np.array(frame.placement.translation), np.array(frame.placement.rotation),
                    np.array(model.lowerPositionLimit), np.array(model.upperPositionLimit),
                    np.array(model.velocityLimit), with_orientation)
+
+    def kernel_params(self) -> tuple:
+        """Return ``(CHAIN, <unused lengths>, offsets, bases, tip offset, tip rotation)``."""
+        return (CHAIN, np.zeros(0), self._offsets, self._bases, self._tip_offset,
+                self._tip_rotation)
 
     def tip_frames(self, configs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Return tip positions ``(N, 3)`` and rotation matrices ``(N, 3, 3)``."""

@@ -55,12 +55,13 @@ class FailureMapError(ValueError):
     """A failure map file or failure that cannot be used, with the reason."""
 
 
-def _unit(vector: np.ndarray, norm: float) -> np.ndarray:
+def unit(vector: np.ndarray, norm: float | None = None) -> np.ndarray:
     """
-    Scale to unit length, keeping a unit vector bit for bit.
+    Scale to unit length, keeping a vector already of unit length bit for bit.
 
-    So a saved and reloaded map is identical to the original.
+    So that a map or world that is saved and reloaded is identical to the original.
     """
+    norm = float(np.linalg.norm(vector)) if norm is None else norm
     return vector if abs(norm - 1.0) < 1e-12 else vector / norm
 
 
@@ -98,11 +99,11 @@ class FailureMap:
             norm = np.linalg.norm(q)
             if q.shape != (4,) or not (np.isfinite(norm) and norm > 0):
                 raise FailureMapError('q must be a nonzero quaternion (w, x, y, z)')
-            q = _unit(q, norm)
+            q = unit(q, norm)
         else:
             q = np.array([1.0, 0.0, 0.0, 0.0])
         self.points = np.vstack([self.points, x])
-        self.directions = np.vstack([self.directions, _unit(v, speed)])
+        self.directions = np.vstack([self.directions, unit(v, speed)])
         self.orientations = np.vstack([self.orientations, q])
 
     def clear(self) -> None:

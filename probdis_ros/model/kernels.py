@@ -100,3 +100,270 @@ def quaternion_kernel(rot: np.ndarray, quat_out: np.ndarray) -> None:
         quat_out[k, 1] = x / norm
         quat_out[k, 2] = y / norm
         quat_out[k, 3] = z / norm
+
+
+# -- edge costs -------------------------------------------------------------------------------
+#
+# An edge is the straight joint-space segment from a to b, cut into n = ceil(L / delta) equal
+# steps; the failure probability is evaluated at the end of each step.  Along the segment the
+# joint angles (and, for the planar arm, their running sums) change linearly, so their cosines
+# and sines are advanced by angle addition instead of being recomputed.  Points are handled in
+# chunks: poses of a chunk, then their probabilities, then the running cost, so that an edge
+# that can no longer win stops early.  (Numba function calls with array arguments cost more
+# than the arithmetic of one point, so no function is called per point.)
+#
+# Arm parameters: kind 0 is the planar chain (link_lengths), kind 1 the revolute chain
+# (offsets, bases, tip_offset, tip_rotation as in chain_kernel).
+# Failure parameters: points (F, d), unit directions (F, d), rotation matrices (F, 3, 3) of
+# the failure orientations, c_fail, and use_orient.
+
+PLANAR = 0
+CHAIN = 1
+CHUNK = 16
+
+
+@numba.njit(cache=True)
+def _chunk_poses(cs, sn, cd, sd, b, k0, count, n, kind, link_lengths, offsets, bases,
+                 tip_offset, tip_rotation, pos, rot):
+    """
+    Advance the joint cosines/sines count steps; write the poses of points k0+1...
+
+    The last point of the edge (k = n) is recomputed from b so that it lands exactly there.
+    """
+    n_joints = cs.shape[0]
+    for i in range(count):
+        k = k0 + i + 1
+        for j in range(n_joints):
+            c_new = cs[j] * cd[j] - sn[j] * sd[j]
+            sn[j] = sn[j] * cd[j] + cs[j] * sd[j]
+            cs[j] = c_new
+        if k == n:
+            angle = 0.0
+            for j in range(n_joints):
+                angle = angle + b[j] if kind == PLANAR else b[j]
+                cs[j] = np.cos(angle)
+                sn[j] = np.sin(angle)
+        if kind == PLANAR:
+            px = 0.0
+            py = 0.0
+            for j in range(n_joints):
+                px += link_lengths[j] * cs[j]
+                py += link_lengths[j] * sn[j]
+            pos[i, 0] = px
+            pos[i, 1] = py
+            pos[i, 2] = 0.0
+            continue
+        px = py = pz = 0.0
+        r00, r01, r02 = 1.0, 0.0, 0.0
+        r10, r11, r12 = 0.0, 1.0, 0.0
+        r20, r21, r22 = 0.0, 0.0, 1.0
+        for j in range(offsets.shape[0]):
+            ox, oy, oz = offsets[j, 0], offsets[j, 1], offsets[j, 2]
+            px += r00 * ox + r01 * oy + r02 * oz
+            py += r10 * ox + r11 * oy + r12 * oz
+            pz += r20 * ox + r21 * oy + r22 * oz
+            c = cs[j]
+            s = sn[j]
+            m00 = bases[j, 0, 0, 0] + c * bases[j, 1, 0, 0] + s * bases[j, 2, 0, 0]
+            m01 = bases[j, 0, 0, 1] + c * bases[j, 1, 0, 1] + s * bases[j, 2, 0, 1]
+            m02 = bases[j, 0, 0, 2] + c * bases[j, 1, 0, 2] + s * bases[j, 2, 0, 2]
+            m10 = bases[j, 0, 1, 0] + c * bases[j, 1, 1, 0] + s * bases[j, 2, 1, 0]
+            m11 = bases[j, 0, 1, 1] + c * bases[j, 1, 1, 1] + s * bases[j, 2, 1, 1]
+            m12 = bases[j, 0, 1, 2] + c * bases[j, 1, 1, 2] + s * bases[j, 2, 1, 2]
+            m20 = bases[j, 0, 2, 0] + c * bases[j, 1, 2, 0] + s * bases[j, 2, 2, 0]
+            m21 = bases[j, 0, 2, 1] + c * bases[j, 1, 2, 1] + s * bases[j, 2, 2, 1]
+            m22 = bases[j, 0, 2, 2] + c * bases[j, 1, 2, 2] + s * bases[j, 2, 2, 2]
+            r00, r01, r02 = (r00 * m00 + r01 * m10 + r02 * m20,
+                             r00 * m01 + r01 * m11 + r02 * m21,
+                             r00 * m02 + r01 * m12 + r02 * m22)
+            r10, r11, r12 = (r10 * m00 + r11 * m10 + r12 * m20,
+                             r10 * m01 + r11 * m11 + r12 * m21,
+                             r10 * m02 + r11 * m12 + r12 * m22)
+            r20, r21, r22 = (r20 * m00 + r21 * m10 + r22 * m20,
+                             r20 * m01 + r21 * m11 + r22 * m21,
+                             r20 * m02 + r21 * m12 + r22 * m22)
+        ox, oy, oz = tip_offset[0], tip_offset[1], tip_offset[2]
+        pos[i, 0] = px + r00 * ox + r01 * oy + r02 * oz
+        pos[i, 1] = py + r10 * ox + r11 * oy + r12 * oz
+        pos[i, 2] = pz + r20 * ox + r21 * oy + r22 * oz
+        for c in range(3):
+            t0, t1, t2 = tip_rotation[0, c], tip_rotation[1, c], tip_rotation[2, c]
+            rot[i, 0, c] = r00 * t0 + r01 * t1 + r02 * t2
+            rot[i, 1, c] = r10 * t0 + r11 * t1 + r12 * t2
+            rot[i, 2, c] = r20 * t0 + r21 * t1 + r22 * t2
+
+
+@numba.njit(cache=True)
+def _arccos_upper(x):
+    """
+    Return a cheap upper bound of arccos(x) on [-1, 1].
+
+    arcsin(y) >= y and arcsin(y) <= (pi / 2) y for y in [0, 1] give
+    arccos(x) <= pi/2 - x (x >= 0) and arccos(x) <= pi/2 (1 - x) (x < 0).
+    """
+    if x >= 0.0:
+        return 0.5 * np.pi - x
+    return 0.5 * np.pi * (1.0 - x)
+
+
+@numba.njit(cache=True)
+def _chunk_probabilities(pos, rot, count, dim, f_points, f_dirs, f_rots, c_fail, use_orient,
+                         winner, p_out):
+    """
+    Write max over failures of P_COORD * (1 - 0.5 D_ORIENT) for each pose of the chunk.
+
+    The previous point's winning failure goes first; then a failure is skipped as soon as an
+    upper bound of its probability cannot beat the best so far: ``1 / (1 + c d^2)``, a cheap
+    bound of alpha, the value without the orientation factor (at most 1).  The bounds are
+    rigorous (inflated by 1e-9 against rounding), so the maximum is exact.  Returns the
+    winner of the last point.
+    """
+    n_fail = f_points.shape[0]
+    for i in range(count):
+        px, py, pz = pos[i, 0], pos[i, 1], pos[i, 2]
+        best = 0.0
+        for m in range(-1, n_fail):
+            f = winner if m < 0 else m
+            if f < 0 or (m >= 0 and f == winner):
+                continue
+            dx = f_points[f, 0] - px
+            dy = f_points[f, 1] - py
+            dz = f_points[f, 2] - pz if dim == 3 else 0.0
+            d2 = dx * dx + dy * dy + dz * dz
+            bound = 1.0 / (1.0 + c_fail * d2)
+            if bound <= best:
+                continue
+            if d2 > 0.0:
+                dot = f_dirs[f, 0] * dx + f_dirs[f, 1] * dy
+                if dim == 3:
+                    dot += f_dirs[f, 2] * dz
+                cos_alpha = min(1.0, max(-1.0, dot / np.sqrt(d2)))
+                upper = _arccos_upper(cos_alpha) / np.pi * (1.0 + 1e-9)
+                if upper * upper * upper * bound <= best:
+                    continue
+                ratio = np.arccos(cos_alpha) / np.pi
+            else:
+                ratio = 1.0
+            p = ratio * ratio * ratio * bound
+            if p <= best:
+                continue
+            if use_orient:
+                trace = 0.0
+                for r in range(3):
+                    for c in range(3):
+                        trace += f_rots[f, r, c] * rot[i, r, c]
+                half_cos = np.sqrt(min(1.0, max(0.0, (trace + 1.0) * 0.25)))
+                p *= 1.0 - 0.5 * (2.0 / np.pi) * np.arccos(half_cos)
+            if p > best:
+                best = p
+                winner = f
+        p_out[i] = best
+    return winner
+
+
+@numba.njit(cache=True)
+def edge_cost_kernel(a, b, bound, delta, length_weight, hard_threshold, p_max, kind,
+                     link_lengths, offsets, bases, tip_offset, tip_rotation,
+                     f_points, f_dirs, f_rots, c_fail, use_orient, pos, rot, p_buf):
+    """
+    Return the cost of edge a -> b, or inf once it is certain to reach bound.
+
+    Probabilistic mode (hard_threshold < 0): ``-sum (s/delta) log(1 - p) + length_weight L``.
+    Hard mode: ``L`` if every p <= hard_threshold, else inf.  pos, rot and p_buf are
+    scratch buffers of CHUNK points.
+    """
+    n_joints = a.shape[0]
+    length = 0.0
+    for j in range(n_joints):
+        length += (b[j] - a[j]) ** 2
+    length = np.sqrt(length)
+    if length == 0.0:
+        return 0.0
+    n = max(1, int(np.ceil(length / delta - 1e-12)))
+    hard = hard_threshold >= 0.0
+    cost = length if hard else length_weight * length
+    if cost >= bound:
+        return np.inf
+    if f_points.shape[0] == 0:
+        return cost
+    weight = (length / n) / delta
+    dim = f_points.shape[1]
+    cs = np.empty(n_joints)
+    sn = np.empty(n_joints)
+    cd = np.empty(n_joints)
+    sd = np.empty(n_joints)
+    run0 = 0.0
+    run1 = 0.0
+    for j in range(n_joints):
+        run0 += a[j]
+        run1 += b[j] - a[j]
+        angle = run0 if kind == PLANAR else a[j]
+        step = (run1 if kind == PLANAR else b[j] - a[j]) / n
+        cs[j] = np.cos(angle)
+        sn[j] = np.sin(angle)
+        cd[j] = np.cos(step)
+        sd[j] = np.sin(step)
+    winner = -1
+    for k0 in range(0, n, CHUNK):
+        count = min(CHUNK, n - k0)
+        _chunk_poses(cs, sn, cd, sd, b, k0, count, n, kind, link_lengths, offsets, bases,
+                     tip_offset, tip_rotation, pos, rot)
+        winner = _chunk_probabilities(pos, rot, count, dim, f_points, f_dirs, f_rots, c_fail,
+                                      use_orient, winner, p_buf)
+        for i in range(count):
+            p = p_buf[i]
+            if hard:
+                if p > hard_threshold:
+                    return np.inf
+            else:
+                cost -= weight * np.log1p(-min(p, p_max))
+        if cost >= bound:
+            return np.inf
+    return cost
+
+
+@numba.njit(cache=True)
+def edge_costs_kernel(sources, target, base, toward, prune, delta, length_weight,
+                      hard_threshold, p_max, kind, link_lengths, offsets, bases, tip_offset,
+                      tip_rotation, f_points, f_dirs, f_rots, c_fail, use_orient, out):
+    """
+    Write ``base[i] + cost(sources[i] -> target)`` (``target -> sources[i]`` unless toward).
+
+    With prune, an edge whose total cannot beat the cheapest total so far stops early and gets
+    inf: the argmin stays exact and most of the work of a nearest-by-cost query is skipped.
+    """
+    pos = np.empty((CHUNK, 3))
+    rot = np.empty((CHUNK, 3, 3))
+    p_buf = np.empty(CHUNK)
+    best = np.inf
+    for i in range(sources.shape[0]):
+        a = sources[i] if toward else target
+        b = target if toward else sources[i]
+        bound = best - base[i] if prune else np.inf
+        cost = base[i] + edge_cost_kernel(a, b, bound, delta, length_weight, hard_threshold,
+                                          p_max, kind, link_lengths, offsets, bases,
+                                          tip_offset, tip_rotation, f_points, f_dirs, f_rots,
+                                          c_fail, use_orient, pos, rot, p_buf)
+        out[i] = cost
+        if cost < best:
+            best = cost
+
+
+@numba.njit(cache=True)
+def farthest_kernel(samples, nodes):
+    """Return the index of the sample whose nearest node is farthest (squared distances)."""
+    best = -1.0
+    best_index = 0
+    for i in range(samples.shape[0]):
+        nearest = np.inf
+        for k in range(nodes.shape[0]):
+            d2 = 0.0
+            for c in range(samples.shape[1]):
+                diff = samples[i, c] - nodes[k, c]
+                d2 += diff * diff
+            if d2 < nearest:
+                nearest = d2
+        if nearest > best:
+            best = nearest
+            best_index = i
+    return best_index

@@ -53,7 +53,7 @@ def edge_points(start: np.ndarray, end: np.ndarray,
     start = np.asarray(start, dtype=float)
     end = np.asarray(end, dtype=float)
     length = float(np.linalg.norm(end - start))
-    n = math.ceil(length / delta - 1e-12) if length > 0 else 0
+    n = max(1, math.ceil(length / delta - 1e-12)) if length > 0 else 0
     if n == 0:
         return np.empty((0, len(start))), 0.0
     fractions = np.arange(1, n + 1)[:, None] / n

@@ -1,0 +1,192 @@
+# Copyright 2026 probdis_ros contributors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The disentangling loop (the paper's ProbDis, Algorithm 1) as a small state machine.
+
+The simulator and the ROS planner node drive the same object::
+
+    loop = Disentangler(arm, planner, goal)
+    path = loop.next_path(current)          # plan from where the arm is
+    ...execute...
+    loop.report_completed(current)          # the whole path ran: at the goal -> success
+    retreat = loop.report_blocked(config, segment)   # blocked on edge `segment` at config:
+    ...execute retreat...                    #   one failure is added, and the retreat goes
+    loop.report_retreated(current)          #   back to the last via point reached
+
+It stops on success, after ``max_paths`` paths (N_ITER), or when asked to (:meth:`stop`).
+A plan that finds no feasible path (possible for Hard) still counts as one of the paths.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import Enum
+import time
+from typing import Protocol
+
+import numpy as np
+from probdis_ros.model.arms import Arm
+from probdis_ros.model.failure_map import FailureMap
+
+#: Joint-space distance [rad] used to find the task-space direction of a blocked motion.
+DIRECTION_PROBE = 1e-3
+
+
+class State(str, Enum):
+    """Where the loop is."""
+
+    READY = 'ready'              # waiting for next_path
+    EXECUTING = 'executing'      # a planned path is being executed
+    RETREATING = 'retreating'    # moving back to the last via point reached
+    SUCCEEDED = 'succeeded'
+    GAVE_UP = 'gave_up'
+    STOPPED = 'stopped'
+
+    @property
+    def finished(self) -> bool:
+        """Tell whether the run is over."""
+        return self in (State.SUCCEEDED, State.GAVE_UP, State.STOPPED)
+
+
+class Planner(Protocol):
+    """Anything that plans a joint path from start to goal under a failure map."""
+
+    def plan(self, start: np.ndarray, goal: np.ndarray, fmap: FailureMap,
+             rng: np.random.Generator):
+        """Return an object with ``path`` (via points) or None if no path was found."""
+
+
+@dataclass
+class Attempt:
+    """One planned path and what became of it, for reports and plots."""
+
+    path: np.ndarray
+    plan_time_s: float
+    blocked_at: np.ndarray | None = None
+    segment: int = -1
+
+
+@dataclass
+class Disentangler:
+    """Plans, receives execution reports, learns failures, replans."""
+
+    arm: Arm
+    planner: Planner
+    goal: np.ndarray
+    fmap: FailureMap | None = None
+    max_paths: int = 20
+    seed: int = 0
+    goal_tolerance: float = 1e-3
+    state: State = State.READY
+    attempts: list[Attempt] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        """Validate the goal and create an empty map and the random generator."""
+        self.goal = self.arm.as_batch(self.goal)[0].copy()
+        if not (np.all(np.isfinite(self.goal)) and self.arm.within_limits(self.goal)[0]):
+            raise ValueError(f'goal is outside the joint limits: {self.goal}')
+        if self.max_paths < 1:
+            raise ValueError('max_paths must be at least 1')
+        if self.fmap is None:
+            self.fmap = FailureMap(self.arm.task_space)
+        self.rng = np.random.default_rng(self.seed)
+        self._retreat_target: np.ndarray | None = None
+
+    @property
+    def paths_tried(self) -> int:
+        """Return the number of paths planned so far."""
+        return len(self.attempts)
+
+    @property
+    def plan_times(self) -> list[float]:
+        """Return the planning time of every path [s]."""
+        return [a.plan_time_s for a in self.attempts]
+
+    def _expect(self, *states: State) -> None:
+        if self.state not in states:
+            raise RuntimeError(f'disentangler is {self.state.value}, expected '
+                               f'{" or ".join(s.value for s in states)}')
+
+    def next_path(self, current: np.ndarray) -> np.ndarray | None:
+        """Plan from current; return the via points to execute, or None when finished."""
+        if self.state.finished:
+            return None
+        self._expect(State.READY)
+        current = self.arm.as_batch(current)[0]
+        while self.paths_tried < self.max_paths:
+            t0 = time.perf_counter()
+            plan = self.planner.plan(current, self.goal, self.fmap, self.rng)
+            elapsed = time.perf_counter() - t0
+            path = None if plan is None else np.asarray(plan.path, dtype=float)
+            self.attempts.append(Attempt(path if path is not None else current[None].copy(),
+                                         elapsed))
+            if path is not None:
+                self.state = State.EXECUTING
+                return path
+        self.state = State.GAVE_UP
+        return None
+
+    def report_completed(self, current: np.ndarray) -> None:
+        """Report that the whole path ran; success if the arm is at the goal."""
+        self._expect(State.EXECUTING)
+        current = self.arm.as_batch(current)[0]
+        if np.linalg.norm(current - self.goal) <= self.goal_tolerance:
+            self.state = State.SUCCEEDED
+        elif self.paths_tried >= self.max_paths:
+            self.state = State.GAVE_UP
+        else:
+            self.state = State.READY
+
+    def report_blocked(self, config: np.ndarray, segment: int) -> np.ndarray:
+        """
+        Report a block at config while executing edge ``segment`` of the current path.
+
+        Adds exactly one failure (where, moving which way, with which orientation) and
+        returns the retreat path to the last via point reached.
+        """
+        self._expect(State.EXECUTING)
+        attempt = self.attempts[-1]
+        if not 0 <= segment < len(attempt.path) - 1:
+            raise ValueError(f'segment {segment} is not an edge of the current path')
+        config = self.arm.as_batch(config)[0]
+        attempt.blocked_at, attempt.segment = config.copy(), segment
+        self.fmap.add(*self.failure_at(config, attempt.path[segment + 1] - attempt.path[segment]))
+        self._retreat_target = attempt.path[segment].copy()
+        self.state = State.RETREATING
+        return np.array([config, self._retreat_target])
+
+    def failure_at(self, config: np.ndarray, joint_direction: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """Return the failure (x, v, q) of a block at config, moving along joint_direction."""
+        norm = float(np.linalg.norm(joint_direction))
+        if norm == 0.0:
+            raise ValueError('a blocked motion needs a nonzero joint direction')
+        before = config - DIRECTION_PROBE * joint_direction / norm
+        pose = self.arm.fk(np.array([before, config]))
+        v = pose.positions[1] - pose.positions[0]
+        if np.linalg.norm(v) < 1e-12:   # singular configuration: use the whole edge's motion
+            v = self.arm.fk(config + joint_direction).positions[0] - pose.positions[1]
+        q = None if pose.orientations is None else pose.orientations[1]
+        return pose.positions[1], v, q
+
+    def report_retreated(self, current: np.ndarray) -> None:
+        """Report that the retreat ended (or stopped); the next plan starts from current."""
+        self._expect(State.RETREATING)
+        self.state = State.GAVE_UP if self.paths_tried >= self.max_paths else State.READY
+
+    def stop(self) -> None:
+        """End the run now (no further paths)."""
+        if not self.state.finished:
+            self.state = State.STOPPED

@@ -1,0 +1,57 @@
+# Copyright 2026 probdis_ros contributors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The Epsilon baseline (epsilon-greedy): no map, no search.
+
+With probability epsilon the path is the straight joint-space move to the goal; otherwise it
+is a move of length ``step`` in a uniformly random joint-space direction, cut at the joint
+limits.  The failure map is ignored.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+from probdis_ros.model.arms import Arm
+from probdis_ros.model.failure_map import FailureMap
+from probdis_ros.planning.prob_rrt import Plan
+
+
+class EpsilonPlanner:
+    """Straight to the goal with probability epsilon, else a random direction."""
+
+    def __init__(self, arm: Arm, epsilon: float = 0.2, step: float = 1.0) -> None:
+        if not 0.0 <= epsilon <= 1.0:
+            raise ValueError(f'epsilon must be in [0, 1], got {epsilon}')
+        if step <= 0:
+            raise ValueError(f'step must be > 0, got {step}')
+        self.arm = arm
+        self.epsilon = epsilon
+        self.step = step
+
+    def plan(self, start: np.ndarray, goal: np.ndarray, fmap: FailureMap,
+             rng: np.random.Generator) -> Plan:
+        """Return a one-edge path (the map is not used)."""
+        t0 = time.perf_counter()
+        start = np.asarray(start, dtype=float)
+        if rng.random() < self.epsilon:
+            end = np.asarray(goal, dtype=float)
+        else:
+            direction = rng.normal(size=len(start))
+            end = start + self.step * direction / np.linalg.norm(direction)
+            end = np.clip(end, self.arm.lower, self.arm.upper)
+        path = np.array([start, end])
+        return Plan(path, float(np.linalg.norm(end - start)), time.perf_counter() - t0)

@@ -1,0 +1,153 @@
+# Copyright 2026 probdis_ros contributors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""ProbRRT and the baselines: paths, limits, reproducibility, same plans as the reference."""
+
+import numpy as np
+from probdis_ros.model import arm_for_setting, FailureMap, TaskSpace
+from probdis_ros.model.edge_costs import EdgeCoster, ReferenceEdgeCoster
+from probdis_ros.model.path_cost import edge_points, path_success_probability
+from probdis_ros.planning import EpsilonPlanner, make_planner, ProbRRT, RRTSettings
+import pytest
+
+PLANAR = arm_for_setting('2d')
+# the stretched-out arm swings its base joint through 1.2 rad: a 0.84 m arc of the tip
+START = np.array([np.pi / 2 + 0.6, 0, 0, 0, 0, 0, 0])
+GOAL = np.array([np.pi / 2 - 0.6, 0, 0, 0, 0, 0, 0])
+
+
+def wall_map() -> FailureMap:
+    """Failures across the straight move, a fifth of the way along, blocking it."""
+    fmap = FailureMap(TaskSpace.POINT2, 100.0)
+    angle = np.pi / 2 + 0.6 - 0.24
+    tangent = np.array([np.sin(angle), -np.cos(angle)])
+    for radius in (0.5, 0.6, 0.7):
+        fmap.add(radius * np.array([np.cos(angle), np.sin(angle)]), tangent)
+    return fmap
+
+
+def test_empty_map_path_joins_start_and_goal():
+    plan = ProbRRT(PLANAR).plan(START, GOAL, FailureMap(TaskSpace.POINT2),
+                                np.random.default_rng(0))
+    np.testing.assert_array_equal(plan.path[0], START)
+    np.testing.assert_array_equal(plan.path[-1], GOAL)
+    assert plan.cost == pytest.approx(0.01 * np.linalg.norm(np.diff(plan.path, axis=0),
+                                                            axis=1).sum())
+
+
+def test_path_goes_around_a_failure_wall():
+    fmap = wall_map()
+    straight = path_success_probability(PLANAR, fmap, np.array([START, GOAL]))
+    around = [path_success_probability(PLANAR, fmap, ProbRRT(PLANAR).plan(
+        START, GOAL, fmap, np.random.default_rng(seed)).path) for seed in range(5)]
+    assert straight < 1e-3
+    assert np.median(around) > 20 * straight
+
+
+def test_paths_never_leave_the_joint_limits():
+    arm = arm_for_setting('3d-orient')
+    near_limit = arm.upper - 0.01
+    goal = arm.lower + 0.01
+    for seed in range(3):
+        plan = ProbRRT(arm).plan(near_limit, goal, FailureMap(TaskSpace.POSE3),
+                                 np.random.default_rng(seed))
+        # via points inside the box of limits keep every straight edge inside it too
+        assert arm.within_limits(plan.path, tol=0.0).all()
+
+
+def test_reproducible_from_its_seed():
+    fmap = wall_map()
+    a = ProbRRT(PLANAR).plan(START, GOAL, fmap, np.random.default_rng(7))
+    b = ProbRRT(PLANAR).plan(START, GOAL, fmap, np.random.default_rng(7))
+    c = ProbRRT(PLANAR).plan(START, GOAL, fmap, np.random.default_rng(8))
+    np.testing.assert_array_equal(a.path, b.path)
+    assert a.cost == b.cost
+    assert not np.array_equal(a.path, c.path)
+
+
+@pytest.mark.parametrize('setting', ['2d', '3d-orient'])
+def test_compiled_costs_give_the_same_plans_as_the_reference(setting):
+    """The speed-ups (compiled kernel, stepped trig, exact pruning) change no decision."""
+    arm = arm_for_setting(setting)
+    rng = np.random.default_rng(3)
+    fmap = FailureMap(arm.task_space, 100.0)
+    poses = arm.fk(arm.random_configurations(rng, 19))
+    for i in range(19):
+        q = None if poses.orientations is None else poses.orientations[i]
+        fmap.add(poses.positions[i], rng.normal(size=arm.task_space.dim), q)
+    settings = RRTSettings(iterations=25)
+    start, goal = arm.random_configurations(rng, 2)
+    for seed in range(2):
+        fast = ProbRRT(arm, settings).plan(start, goal, fmap, np.random.default_rng(seed))
+        slow = ProbRRT(arm, settings, coster_type=ReferenceEdgeCoster).plan(
+            start, goal, fmap, np.random.default_rng(seed))
+        np.testing.assert_array_equal(fast.path, slow.path)
+        assert fast.cost == pytest.approx(slow.cost, rel=1e-9)
+
+
+def test_compiled_edge_costs_match_the_reference():
+    for setting in ('2d', '3d', '3d-orient'):
+        arm = arm_for_setting(setting)
+        rng = np.random.default_rng(4)
+        fmap = FailureMap(arm.task_space, 100.0)
+        poses = arm.fk(arm.random_configurations(rng, 7))
+        for i in range(7):
+            q = None if poses.orientations is None else poses.orientations[i]
+            fmap.add(poses.positions[i], rng.normal(size=arm.task_space.dim), q)
+        sources = arm.random_configurations(rng, 30)
+        target = arm.random_configurations(rng, 1)[0]
+        for toward in (True, False):
+            fast = EdgeCoster(arm, fmap).costs(sources, target, toward)
+            slow = ReferenceEdgeCoster(arm, fmap).costs(sources, target, toward)
+            np.testing.assert_allclose(fast, slow, rtol=1e-9)
+        pruned = EdgeCoster(arm, fmap).costs(sources, target, prune=True)
+        assert np.argmin(pruned) == np.argmin(slow if not toward else fast)
+
+
+def test_hard_refuses_edges_above_its_threshold():
+    fmap = wall_map()
+    hard = EdgeCoster(PLANAR, fmap, hard_threshold=0.01)
+    assert hard.cost(START, GOAL) == np.inf
+    away = START + np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.2])
+    points, _ = edge_points(START, away)
+    if fmap.probability(PLANAR.fk(points)).max() <= 0.01:
+        assert hard.cost(START, away) == pytest.approx(np.linalg.norm(away - START))
+    hard_planner = make_planner('hard', PLANAR, threshold=0.3)
+    plan = hard_planner.plan(START, GOAL, fmap, np.random.default_rng(2))
+    assert plan is not None
+    for a, b in zip(plan.path[:-1], plan.path[1:]):
+        points, _ = edge_points(a, b)
+        assert fmap.probability(PLANAR.fk(points)).max() <= 0.3
+
+
+def test_epsilon_ignores_the_map():
+    planner = EpsilonPlanner(PLANAR, epsilon=0.5)
+    for seed in range(10):
+        a = planner.plan(START, GOAL, FailureMap(TaskSpace.POINT2), np.random.default_rng(seed))
+        b = planner.plan(START, GOAL, wall_map(), np.random.default_rng(seed))
+        np.testing.assert_array_equal(a.path, b.path)
+        assert PLANAR.within_limits(a.path).all()
+    straight = EpsilonPlanner(PLANAR, epsilon=1.0).plan(START, GOAL, wall_map(),
+                                                        np.random.default_rng(0))
+    np.testing.assert_array_equal(straight.path, [START, GOAL])
+
+
+def test_bad_settings_and_configurations_are_refused():
+    with pytest.raises(ValueError, match='p_goal'):
+        RRTSettings(p_goal=2.0)
+    with pytest.raises(ValueError, match='outside the joint limits'):
+        ProbRRT(PLANAR).plan(START + 10, GOAL, FailureMap(TaskSpace.POINT2),
+                             np.random.default_rng(0))
+    with pytest.raises(ValueError, match='unknown method'):
+        make_planner('magic', PLANAR)

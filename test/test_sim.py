@@ -1,0 +1,165 @@
+# Copyright 2026 probdis_ros contributors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The disentangling loop, the compliant simulated arm, worlds and scenario files."""
+
+import numpy as np
+from probdis_ros.model import arm_for_setting
+from probdis_ros.planning import Disentangler, EpsilonPlanner, State
+from probdis_ros.sim.compliant_arm import CompliantArm
+from probdis_ros.sim.episode import run_episode
+from probdis_ros.sim.obstacles import Obstacle
+from probdis_ros.sim.worlds import load_world, random_world, ScenarioError, World
+import pytest
+
+PLANAR = arm_for_setting('2d')
+IIWA = arm_for_setting('3d')
+# the stretched-out planar arm swings its base joint: the tip runs along a circle of 0.7 m
+START = np.array([np.pi / 2 + 0.6, 0, 0, 0, 0, 0, 0])
+GOAL = np.array([np.pi / 2 - 0.6, 0, 0, 0, 0, 0, 0])
+BLOCKER = Obstacle('disc', [0.0, 0.7], 0.03)
+
+
+def test_a_thin_disc_between_two_far_via_points_still_blocks():
+    """The iiwa flange sweeps a long arc; a flat disc 1 mm from nothing must stop it."""
+    a = np.array([-1.2, 0.6, 0.0, -1.0, 0.0, 0.8, 0.0])
+    b = np.array([1.2, 0.6, 0.0, -1.0, 0.0, 0.8, 0.0])
+    middle = IIWA.fk((a + b) / 2).positions[0]
+    normal = IIWA.fk(a + 0.51 * (b - a)).positions[0] - middle
+    disc = Obstacle('disc', middle, 0.01, normal=normal)
+    for check_step in (0.01, 0.05):
+        run = CompliantArm(IIWA, [disc], check_step=check_step).execute(np.array([a, b]))
+        assert run.blocked and run.segment == 0
+        stop = IIWA.fk(run.config).positions[0]
+        assert np.linalg.norm(stop - middle) < 0.02
+
+
+def test_a_small_disc_between_far_via_points_blocks_the_planar_arm():
+    run = CompliantArm(PLANAR, [BLOCKER]).execute(np.array([START, GOAL]))
+    assert run.blocked
+    tip = PLANAR.fk(run.config).positions[0]
+    assert 0.029 < np.linalg.norm(tip - BLOCKER.center) < 0.035
+    assert tip[0] < 0   # stopped on the side it came from
+
+
+def test_free_paths_run_to_the_end():
+    far = Obstacle('disc', [-0.5, -0.5], 0.05)
+    run = CompliantArm(PLANAR, [far]).execute(np.array([START, GOAL]))
+    assert not run.blocked
+    np.testing.assert_array_equal(run.config, GOAL)
+
+
+def test_orientation_gated_obstacles_let_a_turned_flange_pass():
+    a = np.array([-1.2, 0.6, 0.0, -1.0, 0.0, 0.8, 0.0])
+    b = np.array([1.2, 0.6, 0.0, -1.0, 0.0, 0.8, 0.0])
+    pose = arm_for_setting('3d-orient').fk((a + b) / 2)
+    ball = Obstacle('ball', pose.positions[0], 0.05, orientation=pose.orientations[0])
+    arm = arm_for_setting('3d-orient')
+    assert CompliantArm(arm, [ball]).execute(np.array([a, b])).blocked
+    turned = a.copy(), b.copy()
+    for q in turned:
+        q[6] += np.pi     # flange turned half a turn: D_ORIENT = 1 > tolerance
+    assert not CompliantArm(arm, [ball]).execute(np.array(turned)).blocked
+
+
+def straight_loop(max_paths=20) -> Disentangler:
+    """Return a loop whose planner always goes straight to the goal, into the blocker."""
+    return Disentangler(PLANAR, EpsilonPlanner(PLANAR, epsilon=1.0), GOAL, max_paths=max_paths)
+
+
+def test_a_blocked_path_adds_exactly_one_failure_and_retreats_to_the_last_via_point():
+    loop = straight_loop()
+    sim = CompliantArm(PLANAR, [BLOCKER])
+    via = np.array([START, START + np.array([-0.1, 0, 0, 0, 0, 0, 0]), GOAL])
+    loop.next_path(START)
+    loop.attempts[-1].path = via          # execute a path with an intermediate via point
+    run = sim.execute(via)
+    assert run.blocked and run.segment == 1
+    retreat = loop.report_blocked(run.config, run.segment)
+    assert len(loop.fmap) == 1 and loop.state is State.RETREATING
+    np.testing.assert_array_equal(retreat[0], run.config)
+    np.testing.assert_array_equal(retreat[-1], via[1])
+    x, v = loop.fmap.points[0], loop.fmap.directions[0]
+    np.testing.assert_allclose(x, PLANAR.fk(run.config).positions[0])
+    assert v[0] > 0.9     # the tip was moving in +x (clockwise over the top) when blocked
+    with pytest.raises(RuntimeError, match='retreating'):
+        loop.report_blocked(run.config, 0)
+    loop.report_retreated(sim.execute(retreat).config)
+    assert loop.state is State.READY and len(loop.fmap) == 1
+
+
+def test_the_loop_stops_after_n_iter_paths():
+    loop = straight_loop(max_paths=5)
+    sim = CompliantArm(PLANAR, [BLOCKER])
+    current, paths = START, 0
+    while (path := loop.next_path(current)) is not None:
+        paths += 1
+        run = sim.execute(path)
+        back = sim.execute(loop.report_blocked(run.config, run.segment))
+        current = back.config
+        loop.report_retreated(current)
+    assert paths == 5 and loop.paths_tried == 5 and len(loop.fmap) == 5
+    assert loop.state is State.GAVE_UP
+    assert loop.next_path(current) is None
+
+
+def test_success_when_a_path_reaches_the_goal_and_stop_ends_the_run():
+    loop = straight_loop()
+    path = loop.next_path(START)
+    loop.report_completed(path[-1])
+    assert loop.state is State.SUCCEEDED
+    other = straight_loop()
+    other.next_path(START)
+    other.stop()
+    assert other.state is State.STOPPED and other.next_path(START) is None
+
+
+def test_random_worlds_are_reproducible_entangled_and_solvable():
+    for setting, n in (('2d', 10), ('3d', 10), ('3d-orient', 30)):
+        a = random_world(setting, n, seed=5)
+        b = random_world(setting, n, seed=5)
+        assert a.to_dict() == b.to_dict()
+        assert len(a.obstacles) == n and a.rejected_draws >= 0
+        sim = a.compliant_arm()
+        assert sim.execute(np.array([a.start, a.goal])).blocked   # the straight way is shut
+        assert not sim.collides(a.start) and not sim.collides(a.goal)
+
+
+def test_scenario_files_round_trip_and_refuse_bad_input(tmp_path):
+    world = random_world('3d-orient', 30, seed=2)
+    world.save(tmp_path / 'w.yaml')
+    again = load_world(tmp_path / 'w.yaml')
+    assert again.to_dict() == world.to_dict()
+    bad = {
+        'a: [1': 'not valid YAML',
+        'setting: 2d\nstart: [0,0,0,0,0,0,0]\ngoal: [0,0,0,0,0,0,0]\n': 'missing obstacles',
+        'setting: 4d\nstart: []\ngoal: []\nobstacles: []\n': 'setting must be one of',
+        'setting: 2d\nstart: [0,0]\ngoal: [0,0,0,0,0,0,0]\nobstacles: []\n': 'start must be 7',
+        ('setting: 2d\nstart: [0,0,0,0,0,0,0]\ngoal: [0,0,0,0,0,0,0]\nobstacles:\n'
+         '  - {type: ball, center: [0, 0], radius: 0.1}\n'): 'obstacle 0: a ball is 3-D',
+        ('setting: 2d\nstart: [0,0,0,0,0,0,0]\ngoal: [0,0,0,0,0,0,0]\nobstacles:\n'
+         '  - {type: disc, center: [0, 0], radius: -1}\n'): 'radius must be positive',
+    }
+    for text, message in bad.items():
+        (tmp_path / 'bad.yaml').write_text(text)
+        with pytest.raises(ScenarioError, match=message):
+            load_world(tmp_path / 'bad.yaml')
+
+
+def test_an_episode_in_a_hand_made_world():
+    world = World('2d', START, GOAL, [BLOCKER], name='blocker')
+    result = run_episode(world, 'probabilistic', seed=0)
+    assert result.success and result.paths <= 20
+    assert result.failures == result.paths - 1
+    assert len(result.plan_times_s) == result.paths
