@@ -78,3 +78,42 @@ def test_map_plot_refuses_bad_maps_clearly(probdis, tmp_path):
     (tmp_path / 'bad.json').write_text('{"format": "probdis-failure-map", "vers')
     result = probdis('map', 'plot', '--map', str(tmp_path / 'bad.json'), check=False)
     assert result.returncode == 2 and 'truncated or corrupt' in result.stderr
+
+
+def test_sim_json_prints_the_episode(probdis):
+    result = probdis('sim', '--setting', '2d', '--obstacles', '10', '--seed', '4', '--json')
+    doc = json.loads(result.stdout)
+    assert list(doc) == ['success', 'paths', 'failures', 'plan_times_s']
+    assert isinstance(doc['success'], bool) and 1 <= doc['paths'] <= 20
+    assert len(doc['plan_times_s']) == doc['paths']
+    again = json.loads(probdis('sim', '--setting', '2d', '--obstacles', '10', '--seed', '4',
+                               '--json').stdout)
+    assert (again['success'], again['paths'], again['failures']) == \
+        (doc['success'], doc['paths'], doc['failures'])
+
+
+def test_sim_of_the_shipped_scenario_with_a_plot(probdis, tmp_path):
+    out = tmp_path / 'demo.png'
+    result = probdis('sim', '--scenario', 'demo_2d', '--plot', str(out))
+    assert 'demo_2d: probabilistic: disentangled' in result.stdout
+    assert out.read_bytes()[:4] == b'\x89PNG'
+
+
+def test_sim_baselines_and_bad_input(probdis, tmp_path):
+    for method in ('hard', 'epsilon'):
+        doc = json.loads(probdis('sim', '--method', method, '--seed', '1', '--max-paths', '3',
+                                 '--json').stdout)
+        assert doc['paths'] <= 3
+    result = probdis('sim', '--scenario', 'demo_2d', '--seed', '1', check=False)
+    assert result.returncode == 2 and 'not both' in result.stderr
+    (tmp_path / 'bad.yaml').write_text('setting: 2d\nstart: [0, 0]\n')
+    result = probdis('sim', '--scenario', str(tmp_path / 'bad.yaml'), check=False)
+    assert result.returncode == 2 and 'missing goal, obstacles' in result.stderr
+    result = probdis('sim', '--setting', '3d', '--plot', str(tmp_path / 'x.png'), check=False)
+    assert result.returncode == 2 and 'draws 2-D episodes' in result.stderr
+
+
+def test_bench_plan_json_prints_both_medians(probdis):
+    doc = json.loads(probdis('bench', 'plan', '--seeds', '2', '--json', timeout=300).stdout)
+    assert list(doc) == ['median_s_empty_map', 'median_s_19_failures']
+    assert all(isinstance(v, float) and v > 0 for v in doc.values())

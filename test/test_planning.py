@@ -111,8 +111,10 @@ def test_compiled_edge_costs_match_the_reference():
             fast = EdgeCoster(arm, fmap).costs(sources, target, toward)
             slow = ReferenceEdgeCoster(arm, fmap).costs(sources, target, toward)
             np.testing.assert_allclose(fast, slow, rtol=1e-9)
-        pruned = EdgeCoster(arm, fmap).costs(sources, target, prune=True)
-        assert np.argmin(pruned) == np.argmin(slow if not toward else fast)
+        base = np.random.default_rng(5).uniform(0, 1, len(sources))
+        index, total = EdgeCoster(arm, fmap).cheapest(sources, target, base=base)
+        exact = ReferenceEdgeCoster(arm, fmap).costs(sources, target, base=base)
+        assert index == np.argmin(exact) and total == pytest.approx(exact.min(), rel=1e-9)
 
 
 def test_hard_refuses_edges_above_its_threshold():

@@ -35,7 +35,8 @@ from enum import Enum
 from pathlib import Path
 
 import numpy as np
-from probdis_ros.model.kernels import CHAIN, chain_kernel, PLANAR, quaternion_kernel
+from probdis_ros.model.kernels import AXIS_CHAIN, CHAIN, chain_kernel, PLANAR, \
+    quaternion_kernel
 
 
 class TaskSpace(str, Enum):
@@ -239,9 +240,30 @@ class SerialChainArm(Arm):
                    np.array(model.velocityLimit), with_orientation)
 
     def kernel_params(self) -> tuple:
-        """Return ``(CHAIN, <unused lengths>, offsets, bases, tip offset, tip rotation)``."""
-        return (CHAIN, np.zeros(0), self._offsets, self._bases, self._tip_offset,
-                self._tip_rotation)
+        """Return ``(kind, joint params, offsets, bases, tip offset, tip rotation)``.
+
+        AXIS_CHAIN (with signed axis codes) where every joint frame is parallel to the base
+        at zero and turns about a coordinate axis, as in the iiwa URDF; CHAIN otherwise.
+        """
+        codes = self._axis_codes()
+        kind = CHAIN if codes is None else AXIS_CHAIN
+        return (kind, np.zeros(0) if codes is None else codes, self._offsets, self._bases,
+                self._tip_offset, self._tip_rotation)
+
+    def _axis_codes(self) -> np.ndarray | None:
+        codes = []
+        for basis in self._bases:           # basis[0] = origin rotation @ axis axis^T
+            outer = basis[0]
+            axis = np.flatnonzero(np.abs(np.diag(outer) - 1.0) < 1e-12)
+            if len(axis) != 1 or np.abs(outer).sum() > 1.0 + 1e-12:
+                return None
+            cross = basis[2]                 # origin rotation @ [axis]x
+            sign = cross[(axis[0] + 2) % 3, (axis[0] + 1) % 3]
+            identity = basis[0] + basis[1]   # origin rotation @ I
+            if not np.allclose(identity, np.eye(3), atol=1e-12) or abs(abs(sign) - 1) > 1e-12:
+                return None
+            codes.append(np.sign(sign) * (axis[0] + 1))
+        return np.array(codes, dtype=float)
 
     def tip_frames(self, configs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Return tip positions ``(N, 3)`` and rotation matrices ``(N, 3, 3)``."""

@@ -13,7 +13,7 @@
 # limitations under the License.
 
 """
-Edge costs for the planner: many edges per call, compiled, with exact pruning.
+Edge costs for the planner: many edges per call, compiled; the cheapest edge best-first.
 
 :class:`EdgeCoster` evaluates the same cost as :func:`probdis_ros.model.path_cost.edge_cost`
 (probabilistic mode) or the Hard baseline's (length, or inf when any point probability
@@ -27,7 +27,7 @@ from __future__ import annotations
 import numpy as np
 from probdis_ros.model.arms import Arm, quaternion_to_rotation
 from probdis_ros.model.failure_map import FailureMap
-from probdis_ros.model.kernels import edge_costs_kernel
+from probdis_ros.model.kernels import cheapest_edge_kernel, edge_costs_kernel
 from probdis_ros.model.path_cost import (
     DEFAULT_DELTA,
     DEFAULT_LENGTH_WEIGHT,
@@ -61,18 +61,13 @@ class EdgeCoster:
         self._threshold = -1.0 if hard_threshold is None else float(hard_threshold)
 
     def costs(self, sources: np.ndarray, target: np.ndarray, toward: bool = True,
-              prune: bool = False, base: np.ndarray | None = None) -> np.ndarray:
-        """
-        Return ``base[i] + cost(sources[i] -> target)``, or of ``target -> sources[i]``.
-
-        toward chooses the direction of travel.  With prune, only the minimum is exact:
-        totals that cannot beat it come back as inf.
-        """
+              base: np.ndarray | None = None) -> np.ndarray:
+        """Return ``base[i] + cost(sources[i] -> target)``, or ``target -> sources[i]``."""
         sources = np.ascontiguousarray(sources, dtype=float).reshape(-1, self.arm.n_joints)
         target = np.ascontiguousarray(target, dtype=float)
         base = np.zeros(len(sources)) if base is None else np.asarray(base, dtype=float)
         out = np.empty(len(sources))
-        edge_costs_kernel(sources, target, base, toward, prune, self.delta, self.length_weight,
+        edge_costs_kernel(sources, target, base, toward, self.delta, self.length_weight,
                           self._threshold, P_MAX, *self._arm, *self._failures, out)
         return out
 
@@ -80,13 +75,28 @@ class EdgeCoster:
         """Return the cost of one edge."""
         return float(self.costs(start, end)[0])
 
+    def cheapest(self, sources: np.ndarray, target: np.ndarray, toward: bool = True,
+                 base: np.ndarray | None = None) -> tuple[int, float]:
+        """
+        Return (i, total) of the least ``base[i] + cost`` over the edges, exactly.
+
+        (-1, inf) when no edge is feasible.  Ties go to the lowest index, as with argmin.
+        """
+        sources = np.ascontiguousarray(sources, dtype=float).reshape(-1, self.arm.n_joints)
+        target = np.ascontiguousarray(target, dtype=float)
+        base = np.zeros(len(sources)) if base is None else np.asarray(base, dtype=float)
+        index, total = cheapest_edge_kernel(sources, target, base, toward, self.delta,
+                                            self.length_weight, self._threshold, P_MAX,
+                                            *self._arm, *self._failures)
+        return int(index), float(total)
+
 
 class ReferenceEdgeCoster(EdgeCoster):
     """The same costs, evaluated point by point with numpy (slow; for tests and checks)."""
 
     def costs(self, sources: np.ndarray, target: np.ndarray, toward: bool = True,
-              prune: bool = False, base: np.ndarray | None = None) -> np.ndarray:
-        """Return every total exactly (prune is accepted and ignored)."""
+              base: np.ndarray | None = None) -> np.ndarray:
+        """Return every total, point by point."""
         sources = np.asarray(sources, dtype=float).reshape(-1, self.arm.n_joints)
         target = np.asarray(target, dtype=float)
         out = np.empty(len(sources))
@@ -104,3 +114,12 @@ class ReferenceEdgeCoster(EdgeCoster):
             else:
                 out[i] = length if p.max() <= self.hard_threshold else np.inf
         return out if base is None else out + np.asarray(base, dtype=float)
+
+    def cheapest(self, sources: np.ndarray, target: np.ndarray, toward: bool = True,
+                 base: np.ndarray | None = None) -> tuple[int, float]:
+        """Return (i, total) of the least total, from every exact total."""
+        totals = self.costs(sources, target, toward, base=base)
+        index = int(np.argmin(totals))
+        if not np.isfinite(totals[index]):
+            return -1, np.inf
+        return index, float(totals[index])

@@ -112,18 +112,23 @@ def quaternion_kernel(rot: np.ndarray, quat_out: np.ndarray) -> None:
 # that can no longer win stops early.  (Numba function calls with array arguments cost more
 # than the arithmetic of one point, so no function is called per point.)
 #
-# Arm parameters: kind 0 is the planar chain (link_lengths), kind 1 the revolute chain
-# (offsets, bases, tip_offset, tip_rotation as in chain_kernel).
+# Arm parameters (kind, joint_params, offsets, bases, tip_offset, tip_rotation):
+# * PLANAR: the planar chain; joint_params are the link lengths.
+# * CHAIN: any revolute chain; offsets, bases, tip_offset, tip_rotation as in chain_kernel.
+# * AXIS_CHAIN: a revolute chain whose joint frames are parallel at zero and whose axes are
+#   coordinate axes (the iiwa URDF): joint_params are signed axis codes (+-1 x, +-2 y, +-3 z),
+#   so that a joint only mixes two columns of the rotation (about 4x less arithmetic).
 # Failure parameters: points (F, d), unit directions (F, d), rotation matrices (F, 3, 3) of
 # the failure orientations, c_fail, and use_orient.
 
 PLANAR = 0
 CHAIN = 1
+AXIS_CHAIN = 2
 CHUNK = 16
 
 
 @numba.njit(cache=True)
-def _chunk_poses(cs, sn, cd, sd, b, k0, count, n, kind, link_lengths, offsets, bases,
+def _chunk_poses(cs, sn, cd, sd, b, k0, count, n, kind, joint_params, offsets, bases,
                  tip_offset, tip_rotation, pos, rot):
     """
     Advance the joint cosines/sines count steps; write the poses of points k0+1...
@@ -147,11 +152,15 @@ def _chunk_poses(cs, sn, cd, sd, b, k0, count, n, kind, link_lengths, offsets, b
             px = 0.0
             py = 0.0
             for j in range(n_joints):
-                px += link_lengths[j] * cs[j]
-                py += link_lengths[j] * sn[j]
+                px += joint_params[j] * cs[j]
+                py += joint_params[j] * sn[j]
             pos[i, 0] = px
             pos[i, 1] = py
             pos[i, 2] = 0.0
+            continue
+        if kind == AXIS_CHAIN:
+            _axis_chain_pose(cs, sn, joint_params, offsets, tip_offset, tip_rotation, pos, rot,
+                             i)
             continue
         px = py = pz = 0.0
         r00, r01, r02 = 1.0, 0.0, 0.0
@@ -193,32 +202,81 @@ def _chunk_poses(cs, sn, cd, sd, b, k0, count, n, kind, link_lengths, offsets, b
             rot[i, 2, c] = r20 * t0 + r21 * t1 + r22 * t2
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline='always')
+def _axis_chain_pose(cs, sn, codes, offsets, tip_offset, tip_rotation, pos, rot, i):
+    """Write pose i of an AXIS_CHAIN arm from its joint cosines and sines."""
+    px = py = pz = 0.0
+    r00, r01, r02 = 1.0, 0.0, 0.0
+    r10, r11, r12 = 0.0, 1.0, 0.0
+    r20, r21, r22 = 0.0, 0.0, 1.0
+    for j in range(offsets.shape[0]):
+        ox, oy, oz = offsets[j, 0], offsets[j, 1], offsets[j, 2]
+        px += r00 * ox + r01 * oy + r02 * oz
+        py += r10 * ox + r11 * oy + r12 * oz
+        pz += r20 * ox + r21 * oy + r22 * oz
+        code = codes[j]
+        c = cs[j]
+        s = sn[j] if code > 0 else -sn[j]
+        axis = abs(code)
+        if axis == 3.0:      # R <- R Rz: columns 0, 1
+            r00, r01 = r00 * c + r01 * s, r01 * c - r00 * s
+            r10, r11 = r10 * c + r11 * s, r11 * c - r10 * s
+            r20, r21 = r20 * c + r21 * s, r21 * c - r20 * s
+        elif axis == 2.0:    # R <- R Ry: columns 0, 2
+            r00, r02 = r00 * c - r02 * s, r02 * c + r00 * s
+            r10, r12 = r10 * c - r12 * s, r12 * c + r10 * s
+            r20, r22 = r20 * c - r22 * s, r22 * c + r20 * s
+        else:                # R <- R Rx: columns 1, 2
+            r01, r02 = r01 * c + r02 * s, r02 * c - r01 * s
+            r11, r12 = r11 * c + r12 * s, r12 * c - r11 * s
+            r21, r22 = r21 * c + r22 * s, r22 * c - r21 * s
+    ox, oy, oz = tip_offset[0], tip_offset[1], tip_offset[2]
+    pos[i, 0] = px + r00 * ox + r01 * oy + r02 * oz
+    pos[i, 1] = py + r10 * ox + r11 * oy + r12 * oz
+    pos[i, 2] = pz + r20 * ox + r21 * oy + r22 * oz
+    for c in range(3):
+        t0, t1, t2 = tip_rotation[0, c], tip_rotation[1, c], tip_rotation[2, c]
+        rot[i, 0, c] = r00 * t0 + r01 * t1 + r02 * t2
+        rot[i, 1, c] = r10 * t0 + r11 * t1 + r12 * t2
+        rot[i, 2, c] = r20 * t0 + r21 * t1 + r22 * t2
+
+
+@numba.njit(cache=True, inline='always')
 def _arccos_upper(x):
     """
-    Return a cheap upper bound of arccos(x) on [-1, 1].
+    Return a tight upper bound of arccos(x) on [-1, 1] that needs only a square root.
 
-    arcsin(y) >= y and arcsin(y) <= (pi / 2) y for y in [0, 1] give
-    arccos(x) <= pi/2 - x (x >= 0) and arccos(x) <= pi/2 (1 - x) (x < 0).
+    arccos(x) = 2 arcsin(y) with y = sqrt((1 - x) / 2), and arcsin(y) <= y + (pi/2 - 1) y^3
+    on [0, 1] (its Taylor terms beyond y are all positive and y^(2k+1) <= y^3), with
+    equality at both ends.
     """
-    if x >= 0.0:
-        return 0.5 * np.pi - x
-    return 0.5 * np.pi * (1.0 - x)
+    y = np.sqrt(max(0.0, (1.0 - x) * 0.5))
+    return 2.0 * (y + (0.5 * np.pi - 1.0) * y * y * y)
 
 
 @numba.njit(cache=True)
 def _chunk_probabilities(pos, rot, count, dim, f_points, f_dirs, f_rots, c_fail, use_orient,
-                         winner, p_out):
+                         winner, den, p_out):
     """
     Write max over failures of P_COORD * (1 - 0.5 D_ORIENT) for each pose of the chunk.
 
-    The previous point's winning failure goes first; then a failure is skipped as soon as an
-    upper bound of its probability cannot beat the best so far: ``1 / (1 + c d^2)``, a cheap
-    bound of alpha, the value without the orientation factor (at most 1).  The bounds are
-    rigorous (inflated by 1e-9 against rounding), so the maximum is exact.  Returns the
-    winner of the last point.
+    ``1 + c d^2`` of every (point, failure) pair comes first, in a loop the compiler
+    vectorises (den is a scratch buffer).  Then, per point, the previous point's winning
+    failure goes first, and a failure is skipped as soon as an upper bound of its probability
+    cannot beat the best so far: ``1 / (1 + c d^2)``, a cheap bound of alpha, the value without
+    the orientation factor (at most 1).  The bounds are rigorous (inflated by 1e-9 against
+    rounding), so the maximum is exact.  Returns the winner of the last point.
     """
     n_fail = f_points.shape[0]
+    for f in range(n_fail):
+        fx = f_points[f, 0]
+        fy = f_points[f, 1]
+        fz = f_points[f, 2] if dim == 3 else 0.0
+        for i in range(count):
+            dx = fx - pos[i, 0]
+            dy = fy - pos[i, 1]
+            dz = fz - pos[i, 2]
+            den[f, i] = 1.0 + c_fail * (dx * dx + dy * dy + dz * dz)
     for i in range(count):
         px, py, pz = pos[i, 0], pos[i, 1], pos[i, 2]
         best = 0.0
@@ -226,13 +284,14 @@ def _chunk_probabilities(pos, rot, count, dim, f_points, f_dirs, f_rots, c_fail,
             f = winner if m < 0 else m
             if f < 0 or (m >= 0 and f == winner):
                 continue
+            denominator = den[f, i]
+            if best * denominator >= 1.0:     # 1 / (1 + c d^2) <= best, without dividing
+                continue
+            bound = 1.0 / denominator
             dx = f_points[f, 0] - px
             dy = f_points[f, 1] - py
             dz = f_points[f, 2] - pz if dim == 3 else 0.0
             d2 = dx * dx + dy * dy + dz * dz
-            bound = 1.0 / (1.0 + c_fail * d2)
-            if bound <= best:
-                continue
             if d2 > 0.0:
                 dot = f_dirs[f, 0] * dx + f_dirs[f, 1] * dy
                 if dim == 3:
@@ -253,6 +312,10 @@ def _chunk_probabilities(pos, rot, count, dim, f_points, f_dirs, f_rots, c_fail,
                     for c in range(3):
                         trace += f_rots[f, r, c] * rot[i, r, c]
                 half_cos = np.sqrt(min(1.0, max(0.0, (trace + 1.0) * 0.25)))
+                # arccos(h) >= 2 sqrt((1 - h) / 2) bounds the factor before the arccos
+                lower = 2.0 * np.sqrt(max(0.0, (1.0 - half_cos) * 0.5)) * (1.0 - 1e-9)
+                if p * (1.0 - lower / np.pi) <= best:
+                    continue
                 p *= 1.0 - 0.5 * (2.0 / np.pi) * np.arccos(half_cos)
             if p > best:
                 best = p
@@ -262,15 +325,15 @@ def _chunk_probabilities(pos, rot, count, dim, f_points, f_dirs, f_rots, c_fail,
 
 
 @numba.njit(cache=True)
-def edge_cost_kernel(a, b, bound, delta, length_weight, hard_threshold, p_max, kind,
-                     link_lengths, offsets, bases, tip_offset, tip_rotation,
-                     f_points, f_dirs, f_rots, c_fail, use_orient, pos, rot, p_buf):
+def edge_cost_kernel(a, b, delta, length_weight, hard_threshold, p_max, kind,
+                     joint_params, offsets, bases, tip_offset, tip_rotation,
+                     f_points, f_dirs, f_rots, c_fail, use_orient, pos, rot, den, p_buf):
     """
-    Return the cost of edge a -> b, or inf once it is certain to reach bound.
+    Return the cost of edge a -> b.
 
     Probabilistic mode (hard_threshold < 0): ``-sum (s/delta) log(1 - p) + length_weight L``.
-    Hard mode: ``L`` if every p <= hard_threshold, else inf.  pos, rot and p_buf are
-    scratch buffers of CHUNK points.
+    Hard mode: ``L`` if every p <= hard_threshold, else inf.  pos, rot, den and p_buf are
+    scratch buffers for CHUNK points.
     """
     n_joints = a.shape[0]
     length = 0.0
@@ -282,8 +345,6 @@ def edge_cost_kernel(a, b, bound, delta, length_weight, hard_threshold, p_max, k
     n = max(1, int(np.ceil(length / delta - 1e-12)))
     hard = hard_threshold >= 0.0
     cost = length if hard else length_weight * length
-    if cost >= bound:
-        return np.inf
     if f_points.shape[0] == 0:
         return cost
     weight = (length / n) / delta
@@ -306,10 +367,10 @@ def edge_cost_kernel(a, b, bound, delta, length_weight, hard_threshold, p_max, k
     winner = -1
     for k0 in range(0, n, CHUNK):
         count = min(CHUNK, n - k0)
-        _chunk_poses(cs, sn, cd, sd, b, k0, count, n, kind, link_lengths, offsets, bases,
+        _chunk_poses(cs, sn, cd, sd, b, k0, count, n, kind, joint_params, offsets, bases,
                      tip_offset, tip_rotation, pos, rot)
         winner = _chunk_probabilities(pos, rot, count, dim, f_points, f_dirs, f_rots, c_fail,
-                                      use_orient, winner, p_buf)
+                                      use_orient, winner, den, p_buf)
         for i in range(count):
             p = p_buf[i]
             if hard:
@@ -317,36 +378,25 @@ def edge_cost_kernel(a, b, bound, delta, length_weight, hard_threshold, p_max, k
                     return np.inf
             else:
                 cost -= weight * np.log1p(-min(p, p_max))
-        if cost >= bound:
-            return np.inf
     return cost
 
 
 @numba.njit(cache=True)
-def edge_costs_kernel(sources, target, base, toward, prune, delta, length_weight,
-                      hard_threshold, p_max, kind, link_lengths, offsets, bases, tip_offset,
-                      tip_rotation, f_points, f_dirs, f_rots, c_fail, use_orient, out):
-    """
-    Write ``base[i] + cost(sources[i] -> target)`` (``target -> sources[i]`` unless toward).
-
-    With prune, an edge whose total cannot beat the cheapest total so far stops early and gets
-    inf: the argmin stays exact and most of the work of a nearest-by-cost query is skipped.
-    """
+def edge_costs_kernel(sources, target, base, toward, delta, length_weight, hard_threshold,
+                      p_max, kind, joint_params, offsets, bases, tip_offset, tip_rotation,
+                      f_points, f_dirs, f_rots, c_fail, use_orient, out):
+    """Write ``base[i] + cost(sources[i] -> target)`` (``target -> sources[i]`` unless toward)."""
     pos = np.empty((CHUNK, 3))
     rot = np.empty((CHUNK, 3, 3))
+    den = np.empty((f_points.shape[0], CHUNK))
     p_buf = np.empty(CHUNK)
-    best = np.inf
     for i in range(sources.shape[0]):
         a = sources[i] if toward else target
         b = target if toward else sources[i]
-        bound = best - base[i] if prune else np.inf
-        cost = base[i] + edge_cost_kernel(a, b, bound, delta, length_weight, hard_threshold,
-                                          p_max, kind, link_lengths, offsets, bases,
+        out[i] = base[i] + edge_cost_kernel(a, b, delta, length_weight, hard_threshold,
+                                          p_max, kind, joint_params, offsets, bases,
                                           tip_offset, tip_rotation, f_points, f_dirs, f_rots,
-                                          c_fail, use_orient, pos, rot, p_buf)
-        out[i] = cost
-        if cost < best:
-            best = cost
+                                          c_fail, use_orient, pos, rot, den, p_buf)
 
 
 @numba.njit(cache=True)
@@ -367,3 +417,91 @@ def farthest_kernel(samples, nodes):
             best = nearest
             best_index = i
     return best_index
+
+
+@numba.njit(cache=True)
+def cheapest_edge_kernel(sources, target, base, toward, delta, length_weight, hard_threshold,
+                         p_max, kind, joint_params, offsets, bases, tip_offset, tip_rotation,
+                         f_points, f_dirs, f_rots, c_fail, use_orient):
+    """
+    Return (i, total) minimising ``base[i] + cost(edge i)``; (-1, inf) if none is finite.
+
+    Best-first: each edge's cost so far (plus its length term, known up front) is a lower
+    bound of its total, so the edge with the lowest bound is advanced by a chunk of points
+    until one edge is complete with a total no other bound undercuts.  The result is exactly
+    the argmin (ties to the lowest index) while most edges are never costed to the end.
+    Edges run sources[i] -> target if toward, else target -> sources[i].
+    """
+    m, n_joints = sources.shape
+    hard = hard_threshold >= 0.0
+    bound = np.empty(m)           # lower bound of the total (exact when done)
+    done = np.zeros(m, dtype=np.bool_)
+    steps = np.zeros(m, dtype=np.int64)
+    k_done = np.zeros(m, dtype=np.int64)
+    weight = np.zeros(m)
+    winner = np.full(m, -1, dtype=np.int64)
+    cs = np.empty((m, n_joints))
+    sn = np.empty((m, n_joints))
+    cd = np.empty((m, n_joints))
+    sd = np.empty((m, n_joints))
+    ends = np.empty((m, n_joints))
+    for i in range(m):
+        a = sources[i] if toward else target
+        b = target if toward else sources[i]
+        length = 0.0
+        for j in range(n_joints):
+            length += (b[j] - a[j]) ** 2
+        length = np.sqrt(length)
+        bound[i] = base[i] + (length if hard else length_weight * length)
+        if length == 0.0 or f_points.shape[0] == 0:
+            done[i] = True
+            continue
+        n = max(1, int(np.ceil(length / delta - 1e-12)))
+        steps[i] = n
+        weight[i] = (length / n) / delta
+        run0 = 0.0
+        run1 = 0.0
+        for j in range(n_joints):
+            run0 += a[j]
+            run1 += b[j] - a[j]
+            angle = run0 if kind == PLANAR else a[j]
+            step = (run1 if kind == PLANAR else b[j] - a[j]) / n
+            cs[i, j] = np.cos(angle)
+            sn[i, j] = np.sin(angle)
+            cd[i, j] = np.cos(step)
+            sd[i, j] = np.sin(step)
+            ends[i, j] = b[j]
+    pos = np.empty((CHUNK, 3))
+    rot = np.empty((CHUNK, 3, 3))
+    den = np.empty((f_points.shape[0], CHUNK))
+    p_buf = np.empty(CHUNK)
+    dim = f_points.shape[1] if f_points.shape[0] > 0 else 3
+    while True:
+        pick = -1
+        for i in range(m):   # lowest bound first; on equal bounds a finished edge, then index
+            if not np.isfinite(bound[i]):
+                continue
+            if pick < 0 or bound[i] < bound[pick] or (bound[i] == bound[pick] and done[i]
+                                                       and not done[pick]):
+                pick = i
+        if pick < 0:
+            return -1, np.inf
+        if done[pick]:
+            return pick, bound[pick]
+        i = pick
+        count = min(CHUNK, steps[i] - k_done[i])
+        _chunk_poses(cs[i], sn[i], cd[i], sd[i], ends[i], k_done[i], count, steps[i], kind,
+                     joint_params, offsets, bases, tip_offset, tip_rotation, pos, rot)
+        winner[i] = _chunk_probabilities(pos, rot, count, dim, f_points, f_dirs, f_rots,
+                                         c_fail, use_orient, winner[i], den, p_buf)
+        k_done[i] += count
+        for r in range(count):
+            p = p_buf[r]
+            if hard:
+                if p > hard_threshold:
+                    bound[i] = np.inf
+                    break
+            else:
+                bound[i] -= weight[i] * np.log1p(-min(p, p_max))
+        if k_done[i] == steps[i]:
+            done[i] = True
