@@ -20,10 +20,9 @@ and in at least 80 % of the worlds.  (World seeds 0-9; C_FAIL and the step size 
 other seeds, 1000-1015: README "Choosing C_FAIL".)
 """
 
-import pytest
-
 from probdis_ros.sim.episode import run_episode
 from probdis_ros.sim.worlds import random_world
+import pytest
 
 SEEDS = range(10)
 

@@ -35,8 +35,7 @@ from enum import Enum
 from pathlib import Path
 
 import numpy as np
-from probdis_ros.model.kernels import AXIS_CHAIN, CHAIN, chain_kernel, PLANAR, \
-    quaternion_kernel
+from probdis_ros.model.kernels import AXIS_CHAIN, CHAIN, chain_kernel, PLANAR, quaternion_kernel
 
 
 class TaskSpace(str, Enum):
@@ -240,7 +239,8 @@ class SerialChainArm(Arm):
                    np.array(model.velocityLimit), with_orientation)
 
     def kernel_params(self) -> tuple:
-        """Return ``(kind, joint params, offsets, bases, tip offset, tip rotation)``.
+        """
+        Return ``(kind, joint params, offsets, bases, tip offset, tip rotation)``.
 
         AXIS_CHAIN (with signed axis codes) where every joint frame is parallel to the base
         at zero and turns about a coordinate axis, as in the iiwa URDF; CHAIN otherwise.

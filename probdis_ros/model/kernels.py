@@ -393,10 +393,10 @@ def edge_costs_kernel(sources, target, base, toward, delta, length_weight, hard_
     for i in range(sources.shape[0]):
         a = sources[i] if toward else target
         b = target if toward else sources[i]
-        out[i] = base[i] + edge_cost_kernel(a, b, delta, length_weight, hard_threshold,
-                                          p_max, kind, joint_params, offsets, bases,
-                                          tip_offset, tip_rotation, f_points, f_dirs, f_rots,
-                                          c_fail, use_orient, pos, rot, den, p_buf)
+        out[i] = base[i] + edge_cost_kernel(a, b, delta, length_weight, hard_threshold, p_max,
+                                            kind, joint_params, offsets, bases, tip_offset,
+                                            tip_rotation, f_points, f_dirs, f_rots, c_fail,
+                                            use_orient, pos, rot, den, p_buf)
 
 
 @numba.njit(cache=True)
@@ -481,8 +481,9 @@ def cheapest_edge_kernel(sources, target, base, toward, delta, length_weight, ha
         for i in range(m):   # lowest bound first; on equal bounds a finished edge, then index
             if not np.isfinite(bound[i]):
                 continue
-            if pick < 0 or bound[i] < bound[pick] or (bound[i] == bound[pick] and done[i]
-                                                       and not done[pick]):
+            tie_done = bound[i] == bound[pick] and done[i] and not done[pick] if pick >= 0 \
+                else False
+            if pick < 0 or bound[i] < bound[pick] or tie_done:
                 pick = i
         if pick < 0:
             return -1, np.inf
