@@ -35,10 +35,10 @@ $(STAMP): $(REQUIREMENTS) setup.py package.xml
 	$(PY) -m pip install --quiet --disable-pip-version-check --no-deps --no-build-isolation --use-pep517 -e .
 	@touch $(STAMP)
 
-# Until the ROS nodes exist: a simulated disentangling of the shipped 2-D scenario.
+# The main job: disentangle the default scenario, mock iiwa and planner as two processes.
 demo: venv
 	@mkdir -p $(OUT)
-	$(VENV)/bin/probdis sim --scenario demo_2d --plot $(OUT)/demo_2d.png
+	$(VENV)/bin/probdis demo
 
 lint: venv
 	$(PY) -m ruff check probdis_ros test setup.py

@@ -48,6 +48,8 @@ setup(
     entry_points={
         'console_scripts': [
             'probdis = probdis_ros.cli:main',
+            'planner_node = probdis_ros.ros.planner_node:main',
+            'mock_iiwa_node = probdis_ros.ros.mock_iiwa_node:main',
         ],
     },
 )

@@ -107,33 +107,19 @@ def cmd_map_plot(args: argparse.Namespace) -> int:
     return 0
 
 
-def _load_scenario(name: str):
-    """Return the world of a scenario file path, or of a name in config/scenarios/."""
-    from pathlib import Path
-
-    from probdis_ros.resources import share_dir
-    from probdis_ros.sim.worlds import load_world
-
-    path = Path(name)
-    if not path.exists() and path.suffix == '' and len(path.parts) == 1:
-        shipped = share_dir()[1] / 'config' / 'scenarios' / f'{name}.yaml'
-        if shipped.exists():
-            path = shipped
-    return load_world(path)
-
-
 def cmd_sim(args: argparse.Namespace) -> int:
     """Run one simulated disentangling episode."""
     import statistics
 
     from probdis_ros.planning import RRTSettings
+    from probdis_ros.resources import scenario_path
     from probdis_ros.sim.episode import run_episode
-    from probdis_ros.sim.worlds import random_world
+    from probdis_ros.sim.worlds import load_world, random_world
 
     if args.scenario and args.seed is not None:
         raise UsageError('give either --scenario or --seed, not both')
     if args.scenario:
-        world = _load_scenario(args.scenario)
+        world = load_world(scenario_path(args.scenario))
         if args.setting and args.setting != world.setting:
             raise UsageError(f'--setting {args.setting} does not match the scenario '
                              f'({world.setting})')
@@ -181,6 +167,65 @@ def cmd_bench_plan(args: argparse.Namespace) -> int:
         print(f'  19 failures:  {result["median_s_19_failures"]:.3f} s')
         print(f'machine: {result["machine"]}')
     return 0
+
+
+def cmd_node(args: argparse.Namespace) -> int:
+    """Run the planner or the mock iiwa node; ROS arguments pass through."""
+    if args.command == 'planner':
+        from probdis_ros.ros.planner_node import main as node_main
+    else:
+        from probdis_ros.ros.mock_iiwa_node import main as node_main
+    return node_main([sys.argv[0], *args.ros_args])
+
+
+def cmd_service(args: argparse.Namespace) -> int:
+    """Call a planner service; exit 1 on refusal, 3 on timeout."""
+    from probdis_ros.ros.client import PlannerClient
+
+    service = {'start': 'start', 'stop': 'stop', 'reset-map': 'reset_map'}[args.command]
+    with PlannerClient(args.planner) as client:
+        try:
+            ok, message = client.call(service, args.timeout)
+        except TimeoutError as err:
+            print(f'probdis {args.command}: {err}', file=sys.stderr)
+            return 3
+    print(message)
+    return 0 if ok else 1
+
+
+def cmd_status(args: argparse.Namespace) -> int:
+    """Print the planner's latest status (JSON)."""
+    from probdis_ros.ros.client import PlannerClient
+
+    with PlannerClient(args.planner) as client:
+        try:
+            doc = client.status(args.timeout)
+        except TimeoutError as err:
+            print(f'probdis status: {err}', file=sys.stderr)
+            return 3
+    if args.json:
+        _print_json(doc)
+    else:
+        for key, value in doc.items():
+            print(f'{key:>22}: {value}')
+    return 0
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    """Disentangle against the mock iiwa: two processes over DDS on localhost."""
+    from probdis_ros.ros.demo import run_demo
+
+    result = run_demo(args.scenario, args.timeout, quiet=args.json)
+    summary = {k: result[k] for k in ('success', 'paths', 'failures', 'replan_latency_s')}
+    if args.json:
+        _print_json(summary)
+    else:
+        outcome = 'disentangled' if result['success'] else 'NOT disentangled'
+        latency = result['replan_latency_s']
+        print(f'demo: {outcome} after {result["paths"]} path(s), {result["failures"]} '
+              f'failure(s); replan latency median {latency["median"]:.3f} s, '
+              f'max {latency["max"]:.3f} s')
+    return 0 if result['success'] else 1
 
 
 def _positive_int(text: str) -> int:
@@ -243,6 +288,31 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument('--plot', metavar='OUT.png', help='draw the (2-D) episode')
     sim.set_defaults(handler=cmd_sim)
 
+    for name, text in (('planner', 'run the planner node (ROS arguments pass through)'),
+                       ('mock', 'run the mock iiwa node (ROS arguments pass through)')):
+        node = sub.add_parser(name, help=text)
+        node.add_argument('ros_args', nargs=argparse.REMAINDER,
+                          help='e.g. --ros-args --params-file config/planner.yaml')
+        node.set_defaults(handler=cmd_node)
+    for name, text in (('start', 'start a disentangling (~/start)'),
+                       ('stop', 'stop now and hold (~/stop)'),
+                       ('reset-map', 'clear the failure map (~/reset_map)'),
+                       ('status', "print the planner's status")):
+        call = sub.add_parser(name, help=text)
+        call.add_argument('--planner', default='/probdis_planner', help='planner node name')
+        call.add_argument('--timeout', type=float, default=10.0, help='seconds to wait')
+        if name == 'status':
+            call.add_argument('--json', action='store_true', help='print one JSON object')
+            call.set_defaults(handler=cmd_status)
+        else:
+            call.set_defaults(handler=cmd_service)
+    demo = sub.add_parser('demo', help='disentangle against the mock iiwa (two processes)')
+    demo.add_argument('--scenario', default='demo_iiwa', help='scenario file or name')
+    demo.add_argument('--timeout', type=float, default=300.0, help='seconds for the run')
+    demo.add_argument('--json', action='store_true',
+                      help='print {"success", "paths", "failures", "replan_latency_s"}')
+    demo.set_defaults(handler=cmd_demo)
+
     fmap = sub.add_parser('map', help='failure maps')
     map_sub = fmap.add_subparsers(dest='map_command', required=True, metavar='ACTION')
     plot = map_sub.add_parser('plot', help='draw a 2-D probability map as a PNG')
@@ -265,7 +335,8 @@ def main(argv: list[str] | None = None) -> int:
 
     try:
         return handler(args)
-    except (UsageError, FailureMapError, ScenarioError, FileNotFoundError, ValueError) as err:
+    except (UsageError, FailureMapError, ScenarioError, FileNotFoundError, ValueError,
+            RuntimeError, TimeoutError) as err:
         print(f'probdis: error: {err}', file=sys.stderr)
         return 2
     except KeyboardInterrupt:

@@ -68,3 +68,13 @@ def data_file(*parts: str) -> Path:
     if not path.exists():
         raise FileNotFoundError(f'{PACKAGE} data file missing: {path}')
     return path
+
+
+def scenario_path(name: str) -> Path:
+    """Return a scenario file: name as a path, or the name of one in config/scenarios/."""
+    path = Path(name)
+    if not path.exists() and path.suffix == '' and len(path.parts) == 1:
+        shipped = share_dir()[1] / 'config' / 'scenarios' / f'{name}.yaml'
+        if shipped.exists():
+            return shipped
+    return path

@@ -381,7 +381,7 @@ def edge_cost_kernel(a, b, delta, length_weight, hard_threshold, p_max, kind,
     return cost
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def edge_costs_kernel(sources, target, base, toward, delta, length_weight, hard_threshold,
                       p_max, kind, joint_params, offsets, bases, tip_offset, tip_rotation,
                       f_points, f_dirs, f_rots, c_fail, use_orient, out):
@@ -419,7 +419,7 @@ def farthest_kernel(samples, nodes):
     return best_index
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def cheapest_edge_kernel(sources, target, base, toward, delta, length_weight, hard_threshold,
                          p_max, kind, joint_params, offsets, bases, tip_offset, tip_rotation,
                          f_points, f_dirs, f_rots, c_fail, use_orient):

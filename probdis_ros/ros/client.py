@@ -1,0 +1,97 @@
+# Copyright 2026 probdis_ros contributors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Command-line access to a running planner without the ros2 CLI: services and status.
+
+Each call uses its own rclpy context and a short-lived node, so it works from a plain
+process (``probdis start``) as well as inside ``probdis demo``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+
+import rclpy
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.qos import DurabilityPolicy, QoSProfile
+from std_msgs.msg import String
+from std_srvs.srv import Trigger
+
+PLANNER = '/probdis_planner'
+
+
+class PlannerClient:
+    """Calls the planner's services and reads its status."""
+
+    def __init__(self, planner: str = PLANNER) -> None:
+        self.planner = planner
+        self.context = Context()
+        rclpy.init(context=self.context)
+        self.node = rclpy.create_node(f'probdis_client_{os.getpid()}', context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self.latest: dict | None = None
+        latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self.node.create_subscription(String, f'{planner}/status', self._on_status, latched)
+
+    def _on_status(self, msg: String) -> None:
+        self.latest = json.loads(msg.data)
+
+    def call(self, service: str, timeout: float = 10.0) -> tuple[bool, str]:
+        """Call ``<planner>/<service>`` (std_srvs/Trigger); TimeoutError if no answer."""
+        client = self.node.create_client(Trigger, f'{self.planner}/{service}')
+        try:
+            deadline = time.monotonic() + timeout
+            while not client.service_is_ready():
+                if time.monotonic() > deadline:
+                    raise TimeoutError(f'no {self.planner}/{service} service within '
+                                       f'{timeout:.0f} s; is the planner running?')
+                self.executor.spin_once(timeout_sec=0.05)
+            future = client.call_async(Trigger.Request())
+            while not future.done():
+                if time.monotonic() > deadline:
+                    raise TimeoutError(f'{self.planner}/{service} did not answer within '
+                                       f'{timeout:.0f} s')
+                self.executor.spin_once(timeout_sec=0.05)
+            response = future.result()
+            return bool(response.success), response.message
+        finally:
+            self.node.destroy_client(client)
+
+    def status(self, timeout: float = 5.0, newer_than: dict | None = None) -> dict:
+        """Return the latest status (one that differs from newer_than, if given)."""
+        deadline = time.monotonic() + timeout
+        while self.latest is None or (newer_than is not None and self.latest == newer_than):
+            if time.monotonic() > deadline:
+                if self.latest is not None:
+                    return self.latest
+                raise TimeoutError(f'no status from {self.planner} within {timeout:.0f} s')
+            self.executor.spin_once(timeout_sec=0.05)
+        return self.latest
+
+    def close(self) -> None:
+        """Destroy the node and shut the context down."""
+        self.executor.shutdown()
+        self.node.destroy_node()
+        self.context.try_shutdown()
+
+    def __enter__(self) -> PlannerClient:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()

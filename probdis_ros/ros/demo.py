@@ -1,0 +1,116 @@
+# Copyright 2026 probdis_ros contributors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+``probdis demo``: the mock iiwa and the planner as two processes over DDS on localhost.
+
+Starts both nodes as separate processes, starts a disentangling, follows it on the
+planner's status topic with a progress line per change, shuts both down with SIGINT and
+reports the outcome.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+import random
+import signal
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+
+from probdis_ros.resources import data_file, scenario_path
+from probdis_ros.sim.worlds import load_world
+
+FINISHED = ('succeeded', 'gave_up', 'stopped')
+
+
+def ros_environment() -> dict:
+    """Return this environment with ROS 2 kept on this machine (set where unset)."""
+    env = dict(os.environ)
+    env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    env.setdefault('ROS_DOMAIN_ID', str(random.randint(10, 99)))
+    return env
+
+
+def node_command(module: str, *ros_args: str) -> list[str]:
+    """Return the command that runs a node module with ROS arguments."""
+    return [sys.executable, '-m', module, '--ros-args', *ros_args]
+
+
+def stop_process(process: subprocess.Popen, timeout: float = 10.0) -> int:
+    """SIGINT a node, then SIGKILL it if it does not end in time; return its exit code."""
+    if process.poll() is None:
+        process.send_signal(signal.SIGINT)
+        try:
+            return process.wait(timeout)
+        except subprocess.TimeoutExpired:
+            process.kill()
+    return process.wait()
+
+
+def run_demo(scenario: str = 'demo_iiwa', timeout: float = 300.0, quiet: bool = False,
+             extra_planner_args: tuple[str, ...] = ()) -> dict:
+    """Run a disentangling against the mock iiwa; return the outcome summary."""
+    from probdis_ros.ros.client import PlannerClient
+
+    path = scenario_path(scenario)
+    world = load_world(path)
+    env = ros_environment()
+    os.environ.update({k: env[k] for k in ('ROS_AUTOMATIC_DISCOVERY_RANGE', 'ROS_DOMAIN_ID')})
+    say = (lambda *a: None) if quiet else (lambda *a: print(*a, file=sys.stderr, flush=True))
+    with tempfile.TemporaryDirectory(prefix='probdis_demo_') as tmp:
+        goal = '[' + ', '.join(f'{v:.9f}' for v in world.goal) + ']'
+        mock = subprocess.Popen(
+            node_command('probdis_ros.ros.mock_iiwa_node', '-p', f'scenario:={path}'), env=env)
+        planner = subprocess.Popen(node_command(
+            'probdis_ros.ros.planner_node', '--params-file', str(data_file('config',
+                                                                            'planner.yaml')),
+            '-p', f'goal:={goal}', '-p', f'map_file:={Path(tmp) / "map.json"}',
+            *extra_planner_args), env=env)
+        t0 = time.monotonic()
+        status: dict = {}
+        try:
+            with PlannerClient() as client:
+                say(f'demo: {world.name or path}: mock iiwa and planner started '
+                    f'(ROS_DOMAIN_ID={env["ROS_DOMAIN_ID"]})')
+                while True:
+                    ok, message = client.call('start', timeout=60.0)
+                    if ok:
+                        break
+                    if time.monotonic() - t0 > 60.0 or mock.poll() is not None:
+                        raise RuntimeError(f'planner refused to start: {message}')
+                    time.sleep(0.2)
+                say(f'demo: start: {message}')
+                while status.get('state') not in FINISHED:
+                    if time.monotonic() - t0 > timeout:
+                        raise TimeoutError(f'no outcome within {timeout:.0f} s')
+                    if planner.poll() is not None or mock.poll() is not None:
+                        raise RuntimeError('a node exited during the run')
+                    new = client.status(timeout=1.0, newer_than=status)
+                    if new != status:
+                        status = new
+                        say(f'[{time.monotonic() - t0:6.1f} s] {status["state"]:<10} '
+                            f'paths {status["paths"]:>2}  failures {status["failures"]:>2}  '
+                            f'{status["message"]}')
+        finally:
+            codes = (stop_process(planner), stop_process(mock))
+    latencies = status.get('replan_latencies_s') or [0.0]
+    return {'success': status.get('state') == 'succeeded', 'paths': status.get('paths', 0),
+            'failures': status.get('failures', 0),
+            'replan_latency_s': {'median': statistics.median(latencies),
+                                 'max': max(latencies)},
+            'exit_codes': codes}

@@ -1,0 +1,72 @@
+# Copyright 2026 probdis_ros contributors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""RViz markers: failures as arrows, the planned end-effector path, samples of the map."""
+
+from __future__ import annotations
+
+from geometry_msgs.msg import Point
+import numpy as np
+from std_msgs.msg import ColorRGBA
+from visualization_msgs.msg import Marker, MarkerArray
+
+from probdis_ros.model import Arm, FailureMap, TaskPoints
+from probdis_ros.sim.compliant_arm import densify
+
+FRAME = 'lbr_link_0'
+ARROW_LENGTH = 0.05
+MAP_SAMPLES = 400
+
+
+def _point(x: np.ndarray) -> Point:
+    return Point(x=float(x[0]), y=float(x[1]), z=float(x[2]) if len(x) > 2 else 0.0)
+
+
+def markers_msg(arm: Arm, fmap: FailureMap, path: np.ndarray | None, clock,
+                seed: int = 0) -> MarkerArray:
+    """Build the marker array: failures, the planned path (if any) and map samples."""
+    stamp = clock.now().to_msg()
+    out = MarkerArray()
+    clear = Marker(action=Marker.DELETEALL)
+    out.markers.append(clear)
+    for i, (x, v) in enumerate(zip(fmap.points, fmap.directions)):
+        arrow = Marker(type=Marker.ARROW, action=Marker.ADD, ns='failures', id=i)
+        arrow.header.frame_id, arrow.header.stamp = FRAME, stamp
+        arrow.points = [_point(x), _point(x + ARROW_LENGTH * v)]
+        arrow.scale.x, arrow.scale.y, arrow.scale.z = 0.008, 0.016, 0.02
+        arrow.color = ColorRGBA(r=0.9, g=0.1, b=0.1, a=1.0)
+        out.markers.append(arrow)
+    if path is not None and len(path) > 1:
+        line = Marker(type=Marker.LINE_STRIP, action=Marker.ADD, ns='planned_path', id=0)
+        line.header.frame_id, line.header.stamp = FRAME, stamp
+        line.points = [_point(x) for x in arm.fk(densify(np.asarray(path), 0.05)[0]).positions]
+        line.scale.x = 0.006
+        line.color = ColorRGBA(r=0.1, g=0.3, b=0.9, a=1.0)
+        out.markers.append(line)
+    if len(fmap):
+        rng = np.random.default_rng(seed)
+        centre = fmap.points[rng.integers(len(fmap), size=MAP_SAMPLES)]
+        samples = centre + rng.normal(scale=0.08, size=centre.shape)
+        quats = None
+        if fmap.task_space.has_orientation:
+            quats = fmap.orientations[rng.integers(len(fmap), size=MAP_SAMPLES)]
+        prob = fmap.probability(TaskPoints(samples, quats))
+        cloud = Marker(type=Marker.POINTS, action=Marker.ADD, ns='failure_map', id=0)
+        cloud.header.frame_id, cloud.header.stamp = FRAME, stamp
+        cloud.scale.x = cloud.scale.y = 0.01
+        cloud.points = [_point(x) for x in samples]
+        cloud.colors = [ColorRGBA(r=float(p), g=0.0, b=float(1 - p), a=0.3 + 0.7 * float(p))
+                        for p in prob]
+        out.markers.append(cloud)
+    return out

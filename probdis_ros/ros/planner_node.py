@@ -1,0 +1,479 @@
+# Copyright 2026 probdis_ros contributors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+planner_node: probabilistic disentangling over ROS 2 topics and services.
+
+A thin adapter: joint states in, JointTrajectory commands out, the disentangling loop
+(:class:`probdis_ros.planning.Disentangler`) and the blocked-motion detector
+(:mod:`probdis_ros.ros.monitor`) in between.  All node state lives in the executor thread;
+planning runs in a worker thread so that joint states keep being read and checked while a
+plan is computed, and its result is picked up by a timer.
+
+Safety: every commanded position is inside the joint limits and timed within
+``velocity_scaling`` x the URDF velocity limits; malformed or stale joint states stop the
+run with a hold at the last good position; ``~/stop`` holds at once.  The failure map is
+written atomically after every new failure and reloaded at start-up.
+"""
+
+from __future__ import annotations
+
+from concurrent.futures import Future, ThreadPoolExecutor
+import json
+import os
+from pathlib import Path
+import sys
+import time
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+import numpy as np
+import rclpy
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, qos_profile_sensor_data, QoSProfile
+from rcl_interfaces.msg import (
+    FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult)
+from sensor_msgs.msg import JointState
+from std_msgs.msg import String
+from std_srvs.srv import Trigger
+from trajectory_msgs.msg import JointTrajectory
+from visualization_msgs.msg import MarkerArray
+
+from probdis_ros.model import FailureMap, FailureMapError, iiwa_arm
+from probdis_ros.planning import Disentangler, make_planner, METHODS, RRTSettings, State
+from probdis_ros.ros.markers import markers_msg
+from probdis_ros.ros.messages import BadJointState, hold_msg, joint_positions, trajectory_msg
+from probdis_ros.ros.monitor import BlockDetector, DetectorSettings, Verdict
+from probdis_ros.ros.trajectory import nearest_segment, time_path
+
+NODE_NAME = 'probdis_planner'
+
+
+def _float(text: str, low: float, high: float) -> ParameterDescriptor:
+    return ParameterDescriptor(description=text, floating_point_range=[
+        FloatingPointRange(from_value=low, to_value=high)])
+
+
+def _int(text: str, low: int, high: int) -> ParameterDescriptor:
+    return ParameterDescriptor(description=text, integer_range=[
+        IntegerRange(from_value=low, to_value=high)])
+
+
+def default_map_file() -> str:
+    """Return ``$ROS_HOME/probdis/failure_map.json`` (ROS_HOME defaults to ~/.ros)."""
+    home = os.environ.get('ROS_HOME') or os.path.join(os.path.expanduser('~'), '.ros')
+    return os.path.join(home, 'probdis', 'failure_map.json')
+
+
+PARAMETERS = {
+    'joint_states_topic': ('/lbr/joint_states', ParameterDescriptor(
+        description='sensor_msgs/JointState in (sensor-data QoS)')),
+    'trajectory_topic': ('/lbr/joint_trajectory_controller/joint_trajectory',
+                         ParameterDescriptor(description='trajectory_msgs/JointTrajectory out')),
+    'joint_names': ([f'lbr_A{i}' for i in range(1, 8)], ParameterDescriptor(
+        description='the 7 arm joints, in URDF order (matched by name in joint states)')),
+    'goal': ([0.0] * 7, ParameterDescriptor(
+        description='goal configuration [rad], 7 values within the joint limits')),
+    'velocity_scaling': (0.2, _float('fraction of the URDF velocity limits', 0.01, 1.0)),
+    'd_dist': (0.04, _float('L1 gap [rad] above which a stalled motion is blocked',
+                            0.001, 1.0)),
+    'stall_time': (0.3, _float('time without progress that counts as stalled [s]',
+                               0.02, 10.0)),
+    'goal_tolerance': (0.04, _float('joint-space distance to the goal that counts as reached',
+                                    0.0, 1.0)),
+    'state_timeout': (0.5, _float('joint states older than this stop the run [s]',
+                                  0.01, 10.0)),
+    'max_paths': (20, _int('N_ITER: paths before giving up', 1, 1000)),
+    'method': ('probabilistic', ParameterDescriptor(
+        description='probabilistic | hard | epsilon')),
+    'threshold': (0.01, _float('Y of the hard method', 0.0, 1.0)),
+    'epsilon': (0.2, _float('X of the epsilon method', 0.0, 1.0)),
+    'c_fail': (100.0, _float('C_FAIL [1/m^2]', 1e-3, 1e6)),
+    'delta': (0.04, _float('Delta: edge discretisation [rad]', 1e-3, 1.0)),
+    'length_weight': (0.01, _float('lambda: weight of joint-space length', 0.0, 10.0)),
+    'iterations': (100, _int('K: iterations per tree', 1, 100000)),
+    'n_random': (100, _int('|C_RAND|: samples per RandomConfiguration', 1, 100000)),
+    'p_goal': (0.1, _float('P_GOAL', 0.0, 1.0)),
+    'step': (1.0, _float('longest new tree edge [rad]', 0.01, 10.0)),
+    'seed': (0, _int('random seed of the planner', 0, 2**31 - 1)),
+    'map_file': (default_map_file(), ParameterDescriptor(
+        description='failure map file, written after every failure and read at start-up; '
+                    'empty: keep the map in memory only')),
+    'orientation': (True, ParameterDescriptor(
+        description='model the flange orientation in the failure map (3-D with orientation)')),
+}
+
+
+class PlannerNode(Node):
+    """Disentangles on request, over the arm's topics."""
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__(NODE_NAME, **kwargs)
+        for name, (default, descriptor) in PARAMETERS.items():
+            self.declare_parameter(name, default, descriptor)
+        self.add_on_set_parameters_callback(self._check_parameters)
+        self.arm = iiwa_arm(with_orientation=bool(self.get_parameter('orientation').value))
+        self.joint_names = list(self.get_parameter('joint_names').value)
+        problem = self._goal_problem(self.get_parameter('goal').value)
+        if len(self.joint_names) != 7:
+            raise ValueError('joint_names must name 7 joints')
+        if problem:
+            self.get_logger().warning(f'goal parameter: {problem}; ~/start will refuse')
+        self.fmap = self._load_map()
+        self.planner = self._make_planner()   # loads the compiled kernels now, not at ~/start
+        self.measured: np.ndarray | None = None
+        self.measured_at = -np.inf
+        self.loop: Disentangler | None = None
+        self.detector: BlockDetector | None = None
+        self.phase = 'idle'   # idle | planning | executing | retreating | <finished state>
+        self.hold_on_next_state = False
+        self.outcome = ''
+        self.message = 'ready'
+        self.plan_future: Future | None = None
+        self.plan_started = 0.0
+        self.block_time: float | None = None
+        self.retreat_done_at: float | None = None
+        self.pending_path: np.ndarray | None = None
+        self.latencies: list[float] = []
+        self.last_plan_time = 0.0
+        self.worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix='probdis_plan')
+        self.traj_pub = self.create_publisher(
+            JointTrajectory, self.get_parameter('trajectory_topic').value, 10)
+        latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self.status_pub = self.create_publisher(String, '~/status', latched)
+        self.diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self.marker_pub = self.create_publisher(MarkerArray, '~/markers', latched)
+        self.create_subscription(JointState, self.get_parameter('joint_states_topic').value,
+                                 self._on_joint_state, qos_profile_sensor_data)
+        self.create_service(Trigger, '~/start', self._on_start)
+        self.create_service(Trigger, '~/stop', self._on_stop)
+        self.create_service(Trigger, '~/reset_map', self._on_reset_map)
+        self.create_timer(0.01, self._tick)
+        self.create_timer(1.0, self._publish_diagnostics)
+        self._publish_status()
+        self.get_logger().info(f'{NODE_NAME} ready: {len(self.fmap)} failures in the map')
+
+    # -- parameters --------------------------------------------------------------------
+
+    def _goal_problem(self, goal) -> str:
+        goal = np.asarray(goal, dtype=float)
+        if goal.shape != (7,):
+            return f'needs 7 values, has {goal.size}'
+        if not np.all(np.isfinite(goal)) or not self.arm.within_limits(goal)[0]:
+            return 'outside the joint limits'
+        return ''
+
+    def _check_parameters(self, params) -> SetParametersResult:
+        for param in params:
+            if param.name == 'goal':
+                problem = self._goal_problem(param.value)
+                if problem:
+                    return SetParametersResult(successful=False, reason=f'goal {problem}')
+            if param.name == 'method' and param.value not in METHODS:
+                return SetParametersResult(successful=False,
+                                           reason=f'method must be one of {", ".join(METHODS)}')
+            if param.name in ('joint_names', 'joint_states_topic', 'trajectory_topic',
+                              'orientation') and hasattr(self, 'arm'):
+                return SetParametersResult(successful=False,
+                                           reason=f'{param.name} is fixed at start-up')
+        return SetParametersResult(successful=True)
+
+    # -- the failure map ---------------------------------------------------------------
+
+    def _load_map(self) -> FailureMap:
+        c_fail = float(self.get_parameter('c_fail').value)
+        path = self.get_parameter('map_file').value
+        if path and Path(path).exists():
+            try:
+                fmap = FailureMap.load(path)
+                if fmap.task_space is self.arm.task_space:
+                    return fmap
+                self.get_logger().error(f'{path} is a {fmap.task_space.value} map; '
+                                        f'starting with an empty one')
+            except FailureMapError as err:
+                self.get_logger().error(f'{err}; starting with an empty map')
+        return FailureMap(self.arm.task_space, c_fail)
+
+    def _save_map(self) -> None:
+        path = self.get_parameter('map_file').value
+        if path:
+            try:
+                self.fmap.save(path)
+            except OSError as err:
+                self.get_logger().error(f'cannot write the failure map {path}: {err}')
+
+    # -- services ----------------------------------------------------------------------
+
+    def _now(self) -> float:
+        return self.get_clock().now().nanoseconds * 1e-9
+
+    def _on_start(self, request, response):
+        response.success, response.message = self._start()
+        self.get_logger().info(f'start: {response.message}')
+        return response
+
+    def _start(self) -> tuple[bool, str]:
+        if self.active:
+            return False, 'a run is already active; call ~/stop first'
+        age = self._now() - self.measured_at
+        if self.measured is None or age > self.get_parameter('state_timeout').value:
+            return False, 'no fresh joint state has arrived; is the arm (driver) running?'
+        goal = self.get_parameter('goal').value
+        problem = self._goal_problem(goal)
+        if problem:
+            return False, f'goal parameter {problem}'
+        planner = self._make_planner()
+        self.fmap.c_fail = float(self.get_parameter('c_fail').value)
+        self.loop = Disentangler(self.arm, planner, np.asarray(goal, dtype=float), self.fmap,
+                                 max_paths=self.get_parameter('max_paths').value,
+                                 seed=self.get_parameter('seed').value,
+                                 goal_tolerance=self.get_parameter('goal_tolerance').value)
+        self.latencies, self.outcome = [], ''
+        self._plan_from(self.measured)
+        return True, f'disentangling from {np.round(self.measured, 3).tolist()}'
+
+    def _make_planner(self):
+        settings = RRTSettings(
+            iterations=self.get_parameter('iterations').value,
+            delta=self.get_parameter('delta').value,
+            n_random=self.get_parameter('n_random').value,
+            p_goal=self.get_parameter('p_goal').value, step=self.get_parameter('step').value,
+            length_weight=self.get_parameter('length_weight').value)
+        return make_planner(self.get_parameter('method').value, self.arm, settings,
+                            self.get_parameter('threshold').value,
+                            self.get_parameter('epsilon').value)
+
+    def _on_stop(self, request, response):
+        if not self.active:
+            self._hold()
+            response.success, response.message = True, 'no run active; holding'
+            return response
+        self._finish(State.STOPPED, 'stopped on request')
+        response.success, response.message = True, 'stopped; holding the measured position'
+        return response
+
+    def _on_reset_map(self, request, response):
+        if self.active:
+            response.success, response.message = False, 'a run is active; call ~/stop first'
+            return response
+        count = len(self.fmap)
+        self.fmap.clear()
+        self._save_map()
+        self._publish_status()
+        response.success, response.message = True, f'cleared {count} failures'
+        return response
+
+    # -- the run -----------------------------------------------------------------------
+
+    @property
+    def active(self) -> bool:
+        """Tell whether a disentangling run is in progress."""
+        return self.phase in ('planning', 'executing', 'retreating')
+
+    def _plan_from(self, current: np.ndarray) -> None:
+        """Plan the next path in the worker thread; _tick picks it up."""
+        self.phase = 'planning'
+        self.plan_started = time.perf_counter()
+        loop = self.loop
+        self.plan_future = self.worker.submit(loop.next_path, current.copy())
+        self._publish_status()
+
+    def _tick(self) -> None:
+        now = self._now()
+        if self.active and now - self.measured_at > self.get_parameter('state_timeout').value:
+            self._finish(State.STOPPED, f'joint states stopped arriving: none for '
+                         f'{now - self.measured_at:.2f} s (state_timeout)')
+            return
+        if self.plan_future is not None and self.plan_future.done():
+            future, self.plan_future = self.plan_future, None
+            try:
+                path = future.result()
+            except Exception as err:   # a planner bug must not leave the arm moving
+                self.get_logger().error(f'planning failed: {err!r}')
+                self._finish(State.STOPPED, f'planning failed: {err}')
+                return
+            self.last_plan_time = self.loop.plan_times[-1] if self.loop.plan_times else 0.0
+            if path is None:
+                self._finish(self.loop.state, 'no path found within max_paths')
+                return
+            self.pending_path = path
+        arm_ready = self.phase == 'planning' or (
+            self.phase == 'retreating' and self.retreat_done_at is not None)
+        if self.pending_path is not None and arm_ready:
+            path, self.pending_path = self.pending_path, None
+            self._execute(path)
+
+    def _execute(self, path: np.ndarray) -> None:
+        path = np.array(path, dtype=float)
+        path[0] = self.measured
+        if not self.arm.within_limits(path).all():
+            self._finish(State.STOPPED, 'planned path leaves the joint limits; not sent')
+            return
+        timed = time_path(path, self.arm.velocity_limits,
+                          self.get_parameter('velocity_scaling').value)
+        self.traj_pub.publish(trajectory_msg(timed, self.joint_names))
+        now = self._now()
+        if self.block_time is not None:
+            waited = (self.retreat_published - self.block_time) + max(
+                0.0, now - (self.retreat_done_at or now))
+            self.latencies.append(waited)
+            self.block_time = None
+        self.detector = BlockDetector(timed, now, self._detector_settings())
+        self.phase = 'executing'
+        self.retreat_done_at = None
+        self.marker_pub.publish(markers_msg(self.arm, self.fmap, path, self.get_clock()))
+        self._publish_status()
+
+    def _detector_settings(self) -> DetectorSettings:
+        return DetectorSettings(d_dist=self.get_parameter('d_dist').value,
+                                stall_time=self.get_parameter('stall_time').value)
+
+    def _on_joint_state(self, msg: JointState) -> None:
+        try:
+            q = joint_positions(msg, self.joint_names)
+        except BadJointState as err:
+            self.get_logger().error(f'joint state refused: {err}',
+                                    throttle_duration_sec=1.0)
+            if self.active:
+                self._finish(State.STOPPED, f'malformed joint state: {err}')
+            return
+        now = self._now()
+        self.measured, self.measured_at = q, now
+        if self.hold_on_next_state:
+            self._hold()
+            self.hold_on_next_state = False
+        if self.detector is None or not self.active:
+            return
+        verdict = self.detector.update(now, q)
+        if verdict is Verdict.MOVING:
+            return
+        if self.phase == 'executing':
+            self.detector = None
+            if verdict is Verdict.DONE:
+                self.loop.report_completed(q)
+                if self.loop.state.finished:
+                    self._finish(self.loop.state, 'goal reached' if self.loop.state is
+                                 State.SUCCEEDED else 'max_paths reached')
+                else:
+                    self._plan_from(q)
+                return
+            self._on_blocked(q, now)
+        elif self.phase == 'retreating':
+            self.detector = None
+            self.retreat_done_at = now
+
+    def _on_blocked(self, q: np.ndarray, now: float) -> None:
+        path = self.loop.attempts[-1].path
+        segment = nearest_segment(path, q)
+        retreat = self.loop.report_blocked(q, segment)
+        self._save_map()
+        self.block_time = now
+        timed = time_path(retreat, self.arm.velocity_limits,
+                          self.get_parameter('velocity_scaling').value)
+        self.traj_pub.publish(trajectory_msg(timed, self.joint_names))
+        self.retreat_published = self._now()
+        self.detector = BlockDetector(timed, self.retreat_published, self._detector_settings())
+        self.phase = 'retreating'
+        self.retreat_done_at = None
+        self.get_logger().info(f'blocked on segment {segment}: failure {len(self.fmap)} '
+                               f'recorded, retreating and replanning')
+        # plan the next path from the retreat target while the arm moves back
+        self.loop.report_retreated(retreat[-1])
+        if self.loop.state.finished:
+            self._finish(self.loop.state, 'max_paths reached')
+            return
+        self.plan_started = time.perf_counter()
+        self.plan_future = self.worker.submit(self.loop.next_path, retreat[-1].copy())
+        self.marker_pub.publish(markers_msg(self.arm, self.fmap, None, self.get_clock()))
+        self._publish_status()
+
+    def _finish(self, state: State, message: str) -> None:
+        """End the run: a plan still in the worker is dropped, the arm holds unless at goal."""
+        if self.loop is not None and state is State.STOPPED:
+            self.loop.stop()
+        self.outcome = state.value
+        self.plan_future = None
+        self.pending_path = None
+        self.detector = None
+        self.message = message
+        self.phase = state.value
+        if state is not State.SUCCEEDED:
+            self._hold()
+            self.hold_on_next_state = True
+        self.get_logger().info(f'run ended: {self.outcome}: {message}')
+        self._publish_status()
+
+    def _hold(self) -> None:
+        if self.measured is not None:
+            self.traj_pub.publish(hold_msg(self.measured, self.joint_names, 0.01))
+
+    # -- reporting ---------------------------------------------------------------------
+
+    def status(self) -> dict:
+        """Return the status document published on ~/status."""
+        loop = self.loop
+        return {
+            'state': self.phase,
+            'paths': loop.paths_tried if loop else 0,
+            'failures': len(self.fmap),
+            'last_plan_time_s': self.last_plan_time,
+            'last_replan_latency_s': self.latencies[-1] if self.latencies else None,
+            'replan_latencies_s': self.latencies,
+            'outcome': self.outcome,
+            'message': self.message,
+        }
+
+    def _publish_status(self) -> None:
+        self.status_pub.publish(String(data=json.dumps(self.status())))
+        self._publish_diagnostics()
+
+    def _publish_diagnostics(self) -> None:
+        status = self.status()
+        level = DiagnosticStatus.OK
+        if status['state'] in ('stopped', 'gave_up'):
+            level = DiagnosticStatus.WARN
+        diag = DiagnosticStatus(level=level, name=f'{NODE_NAME}: disentangling',
+                                hardware_id='lbr_iiwa14', message=status['message'])
+        diag.values = [KeyValue(key=k, value=str(v)) for k, v in status.items()
+                       if k != 'replan_latencies_s']
+        msg = DiagnosticArray(status=[diag])
+        msg.header.stamp = self.get_clock().now().to_msg()
+        self.diag_pub.publish(msg)
+
+    def destroy_node(self) -> None:
+        """Stop the worker thread with the node."""
+        self.worker.shutdown(wait=False, cancel_futures=True)
+        super().destroy_node()
+
+
+def main(args: list[str] | None = None) -> int:
+    """Run the planner node until SIGINT or SIGTERM."""
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = PlannerNode()
+        rclpy.spin(node)
+    except KeyboardInterrupt:
+        pass
+    except (ValueError, FileNotFoundError) as err:
+        print(f'{NODE_NAME}: error: {err}', file=sys.stderr)
+        return 2
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

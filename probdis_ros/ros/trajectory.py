@@ -1,0 +1,88 @@
+# Copyright 2026 probdis_ros contributors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Joint trajectories as the controller sees them: timing, interpolation, progress.
+
+Pure numpy, no rclpy, so that the live planner node, the mock arm and ``probdis replay``
+share it.  A trajectory here is via points ``(M, n)`` with ``times`` (seconds from its start,
+strictly increasing, ``times[0] = 0`` at the first point, which is where the arm is).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+#: Shortest duration of any segment [s].
+MIN_SEGMENT_S = 0.05
+
+
+@dataclass(frozen=True)
+class TimedPath:
+    """Via points and their times from the start of the motion."""
+
+    points: np.ndarray
+    times: np.ndarray
+
+    @property
+    def duration(self) -> float:
+        """Return the time of the last point [s]."""
+        return float(self.times[-1])
+
+    def at(self, t: float) -> np.ndarray:
+        """Return the desired configuration t seconds after the start (linear in time)."""
+        if t <= 0.0:
+            return self.points[0].copy()
+        if t >= self.times[-1]:
+            return self.points[-1].copy()
+        k = int(np.searchsorted(self.times, t, side='right')) - 1
+        frac = (t - self.times[k]) / (self.times[k + 1] - self.times[k])
+        return self.points[k] + frac * (self.points[k + 1] - self.points[k])
+
+    def segment_at(self, t: float) -> int:
+        """Return the index of the segment being executed at time t."""
+        k = int(np.searchsorted(self.times, t, side='right')) - 1
+        return int(np.clip(k, 0, len(self.points) - 2))
+
+
+def time_path(points: np.ndarray, velocity_limits: np.ndarray, scaling: float) -> TimedPath:
+    """
+    Time via points so that no joint exceeds scaling x its velocity limit.
+
+    Each segment moves every joint linearly and takes as long as its slowest joint needs
+    (at least MIN_SEGMENT_S), so joint speeds stay within the limit everywhere.
+    """
+    points = np.atleast_2d(np.asarray(points, dtype=float))
+    if not 0.0 < scaling <= 1.0:
+        raise ValueError(f'velocity scaling must be in (0, 1], got {scaling}')
+    speeds = scaling * np.asarray(velocity_limits, dtype=float)
+    durations = np.abs(np.diff(points, axis=0)) / speeds
+    segment = np.maximum(durations.max(axis=1, initial=0.0), MIN_SEGMENT_S)
+    return TimedPath(points, np.concatenate([[0.0], np.cumsum(segment)]))
+
+
+def nearest_segment(points: np.ndarray, config: np.ndarray) -> int:
+    """Return the index of the path segment nearest to config (joint space)."""
+    best, best_d = 0, np.inf
+    for k in range(len(points) - 1):
+        a, b = points[k], points[k + 1]
+        d = b - a
+        denom = float(d @ d)
+        frac = 0.0 if denom == 0 else float(np.clip((config - a) @ d / denom, 0.0, 1.0))
+        dist = float(np.linalg.norm(a + frac * d - config))
+        if dist < best_d:
+            best, best_d = k, dist
+    return best
