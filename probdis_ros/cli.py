@@ -291,8 +291,8 @@ def build_parser() -> argparse.ArgumentParser:
     for name, text in (('planner', 'run the planner node (ROS arguments pass through)'),
                        ('mock', 'run the mock iiwa node (ROS arguments pass through)')):
         node = sub.add_parser(name, help=text)
-        node.add_argument('ros_args', nargs=argparse.REMAINDER,
-                          help='e.g. --ros-args --params-file config/planner.yaml')
+        node.add_argument('ros_args', nargs='*', metavar='--ros-args ...',
+                          help='ROS arguments, e.g. --ros-args --params-file planner.yaml')
         node.set_defaults(handler=cmd_node)
     for name, text in (('start', 'start a disentangling (~/start)'),
                        ('stop', 'stop now and hold (~/stop)'),
@@ -328,7 +328,12 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; return the exit status."""
     parser = build_parser()
-    args = parser.parse_args(argv)
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv and argv[0] in ('planner', 'mock') and not {'-h', '--help'} & set(argv[1:2]):
+        # everything after the command belongs to ROS (argparse would take --ros-args)
+        args = argparse.Namespace(command=argv[0], ros_args=argv[1:], handler=cmd_node)
+    else:
+        args = parser.parse_args(argv)
     handler: Callable[[argparse.Namespace], int] = args.handler
     from probdis_ros.model import FailureMapError
     from probdis_ros.sim.worlds import ScenarioError

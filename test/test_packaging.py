@@ -22,9 +22,11 @@ colcon build (as on a ROS machine), ``pip install .`` and the editable install t
 import json
 import os
 from pathlib import Path
+import signal
 import subprocess
 import sys
 import sysconfig
+import time
 
 from catkin_pkg.package import parse_package
 from conftest import copy_source_tree, ROOT, run_probdis
@@ -67,6 +69,22 @@ def test_colcon_build_installs_the_executable_and_the_share_files(tmp_path):
     info = json.loads(run.stdout)
     assert info['found_by'] == 'ament index'
     assert Path(info['share']) == share
+    # ros2 run probdis_ros planner_node, without the ros2 CLI: the installed executable
+    node = install / 'probdis_ros' / 'lib' / 'probdis_ros' / 'planner_node'
+    env['ROS_DOMAIN_ID'] = str((os.getpid() * 11) % 60 + 100)
+    started = subprocess.Popen(
+        ['bash', '-c', f'source {install}/setup.bash && exec {node} --ros-args --params-file '
+                       f'{share}/config/planner.yaml -p map_file:={tmp_path}/map.json'],
+        env=env, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 60
+        for line in started.stderr:
+            if 'probdis_planner ready' in line or time.monotonic() > deadline:
+                break
+        assert 'probdis_planner ready' in line
+    finally:
+        started.send_signal(signal.SIGINT)
+        assert started.wait(20) == 0
 
 
 def test_pip_install_puts_data_files_under_the_prefix(tmp_path):

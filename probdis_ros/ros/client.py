@@ -74,7 +74,7 @@ class PlannerClient:
             self.node.destroy_client(client)
 
     def status(self, timeout: float = 5.0, newer_than: dict | None = None) -> dict:
-        """Return the latest status (one that differs from newer_than, if given)."""
+        """Wait for the latest status document (one differing from newer_than, if given)."""
         deadline = time.monotonic() + timeout
         while self.latest is None or (newer_than is not None and self.latest == newer_than):
             if time.monotonic() > deadline:

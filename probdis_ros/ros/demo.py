@@ -76,11 +76,10 @@ def run_demo(scenario: str = 'demo_iiwa', timeout: float = 300.0, quiet: bool = 
         goal = '[' + ', '.join(f'{v:.9f}' for v in world.goal) + ']'
         mock = subprocess.Popen(
             node_command('probdis_ros.ros.mock_iiwa_node', '-p', f'scenario:={path}'), env=env)
+        params = str(data_file('config', 'planner.yaml'))
         planner = subprocess.Popen(node_command(
-            'probdis_ros.ros.planner_node', '--params-file', str(data_file('config',
-                                                                            'planner.yaml')),
-            '-p', f'goal:={goal}', '-p', f'map_file:={Path(tmp) / "map.json"}',
-            *extra_planner_args), env=env)
+            'probdis_ros.ros.planner_node', '--params-file', params, '-p', f'goal:={goal}',
+            '-p', f'map_file:={Path(tmp) / "map.json"}', *extra_planner_args), env=env)
         t0 = time.monotonic()
         status: dict = {}
         try:

@@ -18,11 +18,10 @@ from __future__ import annotations
 
 from geometry_msgs.msg import Point
 import numpy as np
-from std_msgs.msg import ColorRGBA
-from visualization_msgs.msg import Marker, MarkerArray
-
 from probdis_ros.model import Arm, FailureMap, TaskPoints
 from probdis_ros.sim.compliant_arm import densify
+from std_msgs.msg import ColorRGBA
+from visualization_msgs.msg import Marker, MarkerArray
 
 FRAME = 'lbr_link_0'
 ARROW_LENGTH = 0.05

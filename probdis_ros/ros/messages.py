@@ -24,34 +24,33 @@ from __future__ import annotations
 
 from builtin_interfaces.msg import Duration
 import numpy as np
+from probdis_ros.ros.trajectory import TimedPath
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from probdis_ros.ros.trajectory import TimedPath
 
-
-class BadJointState(ValueError):
+class BadJointStateError(ValueError):
     """A joint-state message that cannot be used, with the reason."""
 
 
 def joint_positions(msg: JointState, joint_names: list[str]) -> np.ndarray:
-    """Return the positions of joint_names from msg, or raise BadJointState."""
+    """Return the positions of joint_names from msg, or raise BadJointStateError."""
     if len(msg.position) != len(msg.name):
-        raise BadJointState(f'{len(msg.name)} names but {len(msg.position)} positions')
+        raise BadJointStateError(f'{len(msg.name)} names but {len(msg.position)} positions')
     index = {name: i for i, name in enumerate(msg.name)}
     missing = [name for name in joint_names if name not in index]
     if missing:
-        raise BadJointState(f'missing joints {", ".join(missing)}')
+        raise BadJointStateError(f'missing joints {", ".join(missing)}')
     q = np.array([msg.position[index[name]] for name in joint_names], dtype=float)
     if not np.all(np.isfinite(q)):
-        raise BadJointState(f'non-finite positions {q.tolist()}')
+        raise BadJointStateError(f'non-finite positions {q.tolist()}')
     return q
 
 
 def duration(seconds: float) -> Duration:
     """Return a builtin_interfaces Duration."""
     sec = int(np.floor(seconds))
-    return Duration(sec=sec, nanosec=int(round((seconds - sec) * 1e9)) % 1_000_000_000)
+    return Duration(sec=sec, nanosec=round((seconds - sec) * 1e9) % 1_000_000_000)
 
 
 def to_seconds(d: Duration) -> float:

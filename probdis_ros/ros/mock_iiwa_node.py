@@ -30,17 +30,16 @@ from collections import deque
 import sys
 
 import numpy as np
-import rclpy
-from rclpy.node import Node
-from rclpy.qos import qos_profile_sensor_data
-from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
-from sensor_msgs.msg import JointState
-from trajectory_msgs.msg import JointTrajectory
-
 from probdis_ros.model import iiwa_arm
 from probdis_ros.resources import scenario_path
 from probdis_ros.ros.messages import timed_path_from_msg
 from probdis_ros.sim.worlds import load_world
+from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
+import rclpy
+from rclpy.node import Node
+from rclpy.qos import qos_profile_sensor_data
+from sensor_msgs.msg import JointState
+from trajectory_msgs.msg import JointTrajectory
 
 JOINTS = [f'lbr_A{i}' for i in range(1, 8)]
 

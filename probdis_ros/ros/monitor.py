@@ -34,7 +34,6 @@ from dataclasses import dataclass
 from enum import Enum
 
 import numpy as np
-
 from probdis_ros.ros.trajectory import TimedPath
 
 

@@ -38,23 +38,26 @@ import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 import numpy as np
+from probdis_ros.model import FailureMap, FailureMapError, iiwa_arm
+from probdis_ros.planning import Disentangler, make_planner, METHODS, RRTSettings, State
+from probdis_ros.ros.markers import markers_msg
+from probdis_ros.ros.messages import BadJointStateError, hold_msg, joint_positions, trajectory_msg
+from probdis_ros.ros.monitor import BlockDetector, DetectorSettings, Verdict
+from probdis_ros.ros.trajectory import nearest_segment, time_path
+from rcl_interfaces.msg import (
+    FloatingPointRange,
+    IntegerRange,
+    ParameterDescriptor,
+    SetParametersResult,
+)
 import rclpy
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, qos_profile_sensor_data, QoSProfile
-from rcl_interfaces.msg import (
-    FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult)
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
-
-from probdis_ros.model import FailureMap, FailureMapError, iiwa_arm
-from probdis_ros.planning import Disentangler, make_planner, METHODS, RRTSettings, State
-from probdis_ros.ros.markers import markers_msg
-from probdis_ros.ros.messages import BadJointState, hold_msg, joint_positions, trajectory_msg
-from probdis_ros.ros.monitor import BlockDetector, DetectorSettings, Verdict
-from probdis_ros.ros.trajectory import nearest_segment, time_path
 
 NODE_NAME = 'probdis_planner'
 
@@ -341,7 +344,7 @@ class PlannerNode(Node):
     def _on_joint_state(self, msg: JointState) -> None:
         try:
             q = joint_positions(msg, self.joint_names)
-        except BadJointState as err:
+        except BadJointStateError as err:
             self.get_logger().error(f'joint state refused: {err}',
                                     throttle_duration_sec=1.0)
             if self.active:

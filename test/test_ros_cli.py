@@ -1,0 +1,79 @@
+# Copyright 2026 probdis_ros contributors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The ROS commands of ``probdis`` as a user runs them: real processes over DDS."""
+
+import json
+import os
+import signal
+import subprocess
+
+from conftest import probdis_command
+from probdis_ros.resources import scenario_path
+from probdis_ros.sim.worlds import load_world
+import pytest
+from ros_harness import wait_for
+
+pytestmark = pytest.mark.ros
+GOAL = load_world(scenario_path('demo_iiwa')).goal
+
+
+@pytest.fixture
+def env():
+    domain = (os.getpid() * 13) % 60 + 160
+    return dict(os.environ, ROS_DOMAIN_ID=str(domain),
+                ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
+
+
+def run(env, *args, timeout=60):
+    return subprocess.run(probdis_command() + list(args), env=env, capture_output=True,
+                          text=True, timeout=timeout)
+
+
+def test_service_commands_against_a_running_planner(env, tmp_path):
+    planner = subprocess.Popen([*probdis_command(), 'planner', '--ros-args',
+                                '-p', f'goal:={GOAL.tolist()}',
+                                '-p', f'map_file:={tmp_path / "map.json"}'], env=env)
+    try:
+        status = {}
+
+        def idle():
+            result = run(env, 'status', '--json', '--timeout', '5')
+            status.update(json.loads(result.stdout) if result.returncode == 0 else {})
+            return status.get('state') == 'idle'
+
+        wait_for(idle, 60, 'the planner status')
+        assert status['failures'] == 0 and status['paths'] == 0
+        refused = run(env, 'start')
+        assert refused.returncode == 1 and 'no fresh joint state' in refused.stdout
+        cleared = run(env, 'reset-map')
+        assert cleared.returncode == 0 and 'cleared 0 failures' in cleared.stdout
+        stop = run(env, 'stop')
+        assert stop.returncode == 0
+    finally:
+        planner.send_signal(signal.SIGINT)
+        assert planner.wait(10) == 0
+    timeout = run(env, 'start', '--timeout', '1')
+    assert timeout.returncode == 3 and 'is the planner running' in timeout.stderr
+
+
+def test_demo_disentangles_through_two_processes(env):
+    result = run(env, 'demo', '--json', timeout=400)
+    assert result.returncode == 0, result.stderr[-2000:]
+    doc = json.loads(result.stdout.strip().splitlines()[-1])
+    assert list(doc) == ['success', 'paths', 'failures', 'replan_latency_s']
+    assert doc['success'] is True
+    assert doc['paths'] >= 2 and doc['failures'] == doc['paths'] - 1
+    assert set(doc['replan_latency_s']) == {'median', 'max'}
+    assert 0 <= doc['replan_latency_s']['median'] <= doc['replan_latency_s']['max']

@@ -1,0 +1,293 @@
+# Copyright 2026 probdis_ros contributors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The planner and mock iiwa nodes as real rclpy nodes: runs, refusals, faults, safety."""
+
+import itertools
+import json
+import math
+import os
+from pathlib import Path
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+from probdis_ros.model import FailureMap, iiwa_arm
+from probdis_ros.resources import scenario_path
+from probdis_ros.ros.mock_iiwa_node import MockIiwa
+from probdis_ros.ros.planner_node import PlannerNode
+from probdis_ros.sim.worlds import load_world
+import pytest
+from rclpy.parameter import Parameter
+from ros_harness import JOINTS, RosTest, wait_for
+
+pytestmark = pytest.mark.ros
+WORLD = load_world(scenario_path('demo_iiwa'))
+START, GOAL = WORLD.start, WORLD.goal
+FINISHED = ('succeeded', 'gave_up', 'stopped')
+
+
+@pytest.fixture
+def ros():
+    test = RosTest()
+    yield test
+    test.close()
+
+
+def planner(ros, tmp_path, **params):
+    """Start a planner node in-process (fast motions; nodes share one interpreter)."""
+    params = {'velocity_scaling': 1.0, 'state_timeout': 2.0, **params}
+    overrides = [Parameter('goal', value=GOAL.tolist()),
+                 Parameter('map_file', value=str(tmp_path / 'map.json'))]
+    overrides += [Parameter(k, value=v) for k, v in params.items()]
+    return ros.add(PlannerNode(context=ros.context, parameter_overrides=overrides))
+
+
+def mock(ros, scenario=None, **params):
+    overrides = [Parameter('scenario', value=str(scenario or scenario_path('demo_iiwa')))]
+    overrides += [Parameter(k, value=v) for k, v in params.items()]
+    return ros.add(MockIiwa(context=ros.context, parameter_overrides=overrides))
+
+
+class SteadyStates:
+    """Publishes q from the probe at rate Hz until cancel() (a flag: no timer races)."""
+
+    def __init__(self, ros, q, rate):
+        self.on = True
+        ros.probe.create_timer(1.0 / rate, lambda: self.on and ros.publish_state(q))
+
+    def cancel(self):
+        self.on = False
+
+
+def steady_states(ros, q=START, rate=100.0):
+    """Publish q from the probe at rate Hz."""
+    return SteadyStates(ros, q, rate)
+
+
+def free_scenario(tmp_path) -> Path:
+    doc = WORLD.to_dict()
+    doc['obstacles'] = []
+    path = tmp_path / 'free.yaml'
+    path.write_text(json.dumps(doc))     # JSON is YAML
+    return path
+
+
+def finished(ros):
+    return ros.status.get('state') in FINISHED
+
+
+def test_start_is_refused_without_joint_states(ros, tmp_path):
+    planner(ros, tmp_path)
+    response = ros.call('start')
+    assert not response.success and 'no fresh joint state' in response.message
+    assert not ros.trajectories
+
+
+def test_a_second_start_is_refused(ros, tmp_path):
+    planner(ros, tmp_path)
+    steady_states(ros)
+    wait_for(lambda: ros.call('start').success, 10, 'first start')
+    second = ros.call('start')
+    assert not second.success and 'already active' in second.message
+
+
+def test_bad_goals_are_refused(ros, tmp_path):
+    node = planner(ros, tmp_path)
+    outside = GOAL.copy()
+    outside[1] = 3.0
+    for bad in (outside.tolist(), GOAL[:6].tolist()):
+        result = node.set_parameters([Parameter('goal', value=bad)])[0]
+        assert not result.successful and 'goal' in result.reason
+    assert np.allclose(node.get_parameter('goal').value, GOAL)
+    ros_bad = planner_with_goal = None
+    del ros_bad, planner_with_goal
+
+
+def test_a_goal_outside_the_limits_from_the_start_is_refused_at_start(ros, tmp_path):
+    outside = GOAL.copy()
+    outside[0] = 4.0
+    planner(ros, tmp_path, goal=outside.tolist())
+    steady_states(ros)
+    wait_for(lambda: ros.status.get('state') == 'idle', 10, 'planner status')
+    time.sleep(0.2)
+    response = ros.call('start')
+    assert not response.success and 'outside the joint limits' in response.message
+
+
+@pytest.mark.parametrize('names, positions, reason', [
+    (JOINTS[:6], START[:6], 'missing joints'),
+    (JOINTS, START[:5], 'names but'),
+    (JOINTS, [math.nan, *START[1:].tolist()], 'non-finite'),
+    (JOINTS, [math.inf, *START[1:].tolist()], 'non-finite'),
+])
+def test_malformed_joint_states_stop_the_run_safely(ros, tmp_path, names, positions, reason):
+    node = planner(ros, tmp_path)
+    timer = steady_states(ros)
+    wait_for(lambda: ros.call('start').success, 10, 'start')
+    timer.cancel()
+    ros.publish_state(None, names=names, positions=positions)
+    wait_for(lambda: finished(ros), 5, 'run to stop')
+    assert ros.status['state'] == 'stopped'
+    assert 'malformed joint state' in ros.status['message'] and reason in ros.status['message']
+    for q in ros.positions_commanded():
+        assert np.all(np.isfinite(q)) and node.arm.within_limits(q)[0]
+    last = ros.trajectories[-1][1]
+    assert len(last.points) == 1 and np.allclose(last.points[0].positions, START)
+
+
+def test_joint_states_out_of_order_with_extra_joints_are_matched_by_name(ros, tmp_path):
+    node = planner(ros, tmp_path)
+    order = [3, 0, 6, 1, 5, 2, 4]
+    names = ['gripper'] + [JOINTS[i] for i in order]
+    positions = [0.5] + [START[i] for i in order]
+    ros.probe.create_timer(0.01, lambda: ros.publish_state(None, names, positions))
+    wait_for(lambda: node.measured is not None, 5, 'a joint state')
+    np.testing.assert_allclose(node.measured, START)
+
+
+def test_joint_states_that_stop_arriving_stop_the_run(ros, tmp_path):
+    planner(ros, tmp_path, state_timeout=0.3)
+    timer = steady_states(ros)
+    wait_for(lambda: ros.call('start').success, 10, 'start')
+    timer.cancel()
+    wait_for(lambda: finished(ros), 5, 'run to stop')
+    assert ros.status['state'] == 'stopped'
+    assert 'stopped arriving' in ros.status['message']
+
+
+def test_a_full_run_against_the_mock_learns_and_persists_failures(ros, tmp_path):
+    node = planner(ros, tmp_path)
+    mock(ros)
+    wait_for(lambda: ros.call('start').success, 20, 'start')
+    wait_for(lambda: finished(ros), 120, 'the run to end')
+    status = ros.status
+    assert status['state'] == 'succeeded', status
+    assert status['paths'] >= 2 and status['failures'] == status['paths'] - 1
+    assert len(FailureMap.load(tmp_path / 'map.json')) == status['failures']
+    velocity = 0.2 * iiwa_arm().velocity_limits
+    for _, msg in ros.trajectories:
+        times = [p.time_from_start.sec + p.time_from_start.nanosec * 1e-9 for p in msg.points]
+        assert all(b > a for a, b in itertools.pairwise(times))
+        assert list(msg.points[-1].velocities) == [0.0] * 7
+        assert list(msg.joint_names) == JOINTS
+    assert all(node.arm.within_limits(q)[0] for q in ros.positions_commanded())
+    del velocity
+
+
+def test_stop_during_motion_holds_within_one_control_period(ros, tmp_path):
+    planner(ros, tmp_path)
+    arm = mock(ros)
+    wait_for(lambda: ros.call('start').success, 20, 'start')
+    wait_for(lambda: ros.status.get('state') == 'executing', 20, 'motion')
+    time.sleep(0.3)
+    response = ros.call('stop')
+    stopped_at = time.monotonic()
+    assert response.success
+    wait_for(lambda: len(ros.trajectories[-1][1].points) == 1, 1, 'a hold command')
+    hold = np.array(ros.trajectories[-1][1].points[0].positions)
+    time.sleep(0.1)     # the mock reaches the hold within a control period or two
+    held = np.array(arm.q)
+    np.testing.assert_allclose(held, hold, atol=1e-9)
+    time.sleep(0.5)
+    np.testing.assert_allclose(arm.q, held, atol=1e-9)
+    assert ros.status['state'] == 'stopped'
+    hold_times = [t for t, msg in ros.trajectories if len(msg.points) == 1 and t >= stopped_at]
+    assert hold_times and hold_times[0] - stopped_at < 0.05
+
+
+def test_stop_during_planning_sends_no_path(ros, tmp_path):
+    planner(ros, tmp_path)
+    steady_states(ros)
+    wait_for(lambda: ros.call('start').success, 10, 'start')
+    assert ros.call('stop').success
+    count = len(ros.trajectories)
+    time.sleep(1.5)
+    assert all(len(msg.points) == 1 for _, msg in ros.trajectories[count - 1:])
+    assert ros.status['state'] == 'stopped'
+
+
+def test_joint_state_noise_gives_no_false_blocks(ros, tmp_path):
+    planner(ros, tmp_path)
+    mock(ros, free_scenario(tmp_path), noise=0.001, seed=3)
+    wait_for(lambda: ros.call('start').success, 20, 'start')
+    wait_for(lambda: finished(ros), 60, 'the run to end')
+    assert ros.status['state'] == 'succeeded'
+    assert ros.status['failures'] == 0 and ros.status['paths'] == 1
+
+
+def test_the_planner_keeps_up_with_joint_states_at_1khz(ros, tmp_path):
+    """The mock runs in its own process at 1 kHz; the planner must not fall behind."""
+    node = planner(ros, tmp_path, state_timeout=0.5)
+    env = dict(os.environ, ROS_DOMAIN_ID=str(ros.domain))
+    arm = subprocess.Popen([sys.executable, '-m', 'probdis_ros.ros.mock_iiwa_node',
+                            '--ros-args', '-p', 'rate:=1000.0'], env=env)
+    ages = []
+    ros.probe.create_timer(0.02, lambda: node.measured is not None and ages.append(
+        node._now() - node.measured_at))
+    try:
+        wait_for(lambda: ros.call('start', timeout=30).success, 30, 'start')
+        wait_for(lambda: ros.status.get('failures', 0) >= 1 or finished(ros), 60,
+                 'the first block')
+        assert ros.status['state'] not in ('stopped', 'gave_up'), ros.status
+        # the block was detected where the flange touches a hidden disc
+        x = FailureMap.load(tmp_path / 'map.json').points[0]
+        gaps = [abs((x - o.center) @ o.normal) + max(0.0, np.linalg.norm(x - o.center) - o.radius)
+                for o in WORLD.obstacles]
+        assert min(gaps) < 0.02
+        assert max(ages) < 0.1, f'joint states waited up to {max(ages):.3f} s'
+    finally:
+        arm.send_signal(signal.SIGINT)
+        arm.wait(10)
+
+
+def test_reset_map_clears_the_file_and_is_refused_during_a_run(ros, tmp_path):
+    fmap = FailureMap(iiwa_arm().task_space)
+    fmap.add([0.5, 0, 0.4], [0, 0, 1], [1, 0, 0, 0])
+    fmap.save(tmp_path / 'map.json')
+    planner(ros, tmp_path)
+    wait_for(lambda: ros.status.get('failures') == 1, 10, 'the map to load')
+    response = ros.call('reset_map')
+    assert response.success and 'cleared 1' in response.message
+    assert len(FailureMap.load(tmp_path / 'map.json')) == 0
+    steady_states(ros)
+    wait_for(lambda: ros.call('start').success, 10, 'start')
+    assert not ros.call('reset_map').success
+
+
+def test_a_killed_planner_gets_its_map_back(ros, tmp_path):
+    mock(ros)
+    map_file = tmp_path / 'map.json'
+    command = [sys.executable, '-m', 'probdis_ros.ros.planner_node', '--ros-args',
+               '-p', f'goal:={GOAL.tolist()}', '-p', f'map_file:={map_file}']
+    env = dict(os.environ, ROS_DOMAIN_ID=str(ros.domain))
+    first = subprocess.Popen(command, env=env)
+    try:
+        wait_for(lambda: ros.call('start', timeout=60).success, 60, 'start')
+        wait_for(lambda: ros.status.get('failures', 0) >= 1, 60, 'a failure')
+    finally:
+        first.send_signal(signal.SIGKILL)
+        first.wait()
+    saved = len(FailureMap.load(map_file))
+    assert saved >= 1
+    ros.statuses.clear()
+    second = subprocess.Popen(command, env=env)
+    try:
+        wait_for(lambda: ros.status.get('state') == 'idle', 60, 'the restarted planner')
+        assert ros.status['failures'] == saved
+    finally:
+        second.send_signal(signal.SIGINT)
+        assert second.wait(10) == 0
