@@ -82,6 +82,7 @@ class MockIiwa(Node):
         self.create_subscription(JointTrajectory, self.get_parameter('trajectory_topic').value,
                                  self._on_trajectory, 10)
         self.dt = 1.0 / self.get_parameter('rate').value
+        self.last_step = self._now()
         self.create_timer(self.dt, self._step)
         self.get_logger().info(f'mock iiwa: scenario {self.world.name or "?"} with '
                                f'{len(self.world.obstacles)} hidden obstacles')
@@ -99,10 +100,11 @@ class MockIiwa(Node):
 
     def _step(self) -> None:
         now = self._now()
+        elapsed, self.last_step = max(0.0, now - self.last_step), now
         if self.path is not None:
             target = self.path.at(now - self.path_start)
-            step = np.clip(target - self.q, -self.arm.velocity_limits * self.dt,
-                           self.arm.velocity_limits * self.dt)
+            reach = self.arm.velocity_limits * elapsed     # a late tick may move further
+            step = np.clip(target - self.q, -reach, reach)
             if np.any(step != 0):
                 run = self.sim.execute(np.array([self.q, self.q + step]))
                 self.q = run.config
