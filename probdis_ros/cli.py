@@ -228,6 +228,43 @@ def cmd_demo(args: argparse.Namespace) -> int:
     return 0 if result['success'] else 1
 
 
+def cmd_replay(args: argparse.Namespace) -> int:
+    """Rerun the blocked-motion detector on a bag; rebuild the failure map."""
+    from probdis_ros.ros.monitor import DetectorSettings
+    from probdis_ros.ros.replay import replay, ReplayError
+
+    settings = DetectorSettings(d_dist=args.d_dist)
+    status = 0
+    try:
+        result = replay(args.bag, args.joint_states, args.trajectory, settings=settings)
+    except ReplayError as err:
+        if err.partial is None:
+            raise UsageError(str(err)) from None
+        print(f'probdis replay: error: {err}', file=sys.stderr)
+        result, status = err.partial, 1
+    if args.save_map:
+        result.fmap.save(args.save_map)
+    if args.plot:
+        from probdis_ros.plots import plot_replay
+
+        plot_replay(result, args.plot, args.d_dist)
+    if args.json:
+        _print_json(result.summary())
+        return status
+    print(f'{args.bag}: {result.runs} run(s), {result.paths} path(s), {len(result.blocks)} '
+          f'block(s), {"disentangled" if result.success else "not disentangled"}')
+    for block in result.blocks:
+        x = ', '.join(f'{v:.3f}' for v in block.x)
+        print(f'  block at {block.t:8.3f} s, flange at ({x}) m, segment {block.segment}')
+    for problem in result.problems[:10]:
+        print(f'  note: {problem}')
+    if args.save_map:
+        print(f'wrote {args.save_map} ({len(result.fmap)} failures)')
+    if args.plot:
+        print(f'wrote {args.plot}')
+    return status
+
+
 def _positive_int(text: str) -> int:
     value = int(text)
     if value < 1:
@@ -312,6 +349,18 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument('--json', action='store_true',
                       help='print {"success", "paths", "failures", "replan_latency_s"}')
     demo.set_defaults(handler=cmd_demo)
+
+    rp = sub.add_parser('replay', help='rerun the blocked-motion detector on a rosbag2 bag')
+    rp.add_argument('bag', help='a rosbag2 bag folder (MCAP or sqlite3)')
+    rp.add_argument('--joint-states', default='/lbr/joint_states', help='joint-state topic')
+    rp.add_argument('--trajectory', default='/lbr/joint_trajectory_controller/joint_trajectory',
+                    help='commanded trajectory topic')
+    rp.add_argument('--d-dist', type=float, default=0.04, help='d_dist of the detector [rad]')
+    rp.add_argument('--json', action='store_true',
+                    help='print {"paths", "blocks": [{"t", "x"}], "failures", "success"}')
+    rp.add_argument('--plot', metavar='OUT.png', help='joint gaps and the flange path')
+    rp.add_argument('--save-map', metavar='FILE', help='write the rebuilt failure map')
+    rp.set_defaults(handler=cmd_replay)
 
     fmap = sub.add_parser('map', help='failure maps')
     map_sub = fmap.add_subparsers(dest='map_command', required=True, metavar='ACTION')

@@ -147,3 +147,40 @@ def _dense(path: np.ndarray, step: float = 0.02) -> np.ndarray:
     from probdis_ros.sim.compliant_arm import densify
 
     return densify(np.asarray(path), step)[0]
+
+
+def plot_replay(result, out: str | Path, d_dist: float) -> Path:
+    """Draw a replay: the L1 joint gap over time with the blocks, and the flange path."""
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    from probdis_ros.model import iiwa_arm
+
+    fig = plt.figure(figsize=(11, 4.5))
+    ax = fig.add_subplot(1, 2, 1)
+    ax.plot(result.times, result.gaps, lw=1, color='tab:blue', label='|desired - actual|_1')
+    ax.axhline(d_dist, color='grey', ls='--', lw=1, label='d_dist')
+    for k, block in enumerate(result.blocks):
+        ax.axvline(block.t, color='tab:red', lw=1, label='block' if k == 0 else None)
+    ax.set_xlabel('time since the bag started [s]')
+    ax.set_ylabel('joint gap [rad]')
+    ax.legend(fontsize=8)
+    ax3 = fig.add_subplot(1, 2, 2, projection='3d')
+    if result.configs:
+        xyz = iiwa_arm().fk(np.array(result.configs)).positions
+        ax3.plot(xyz[:, 0], xyz[:, 1], xyz[:, 2], color='tab:blue', lw=1)
+    if result.blocks:
+        x = np.array([b.x for b in result.blocks])
+        ax3.scatter(x[:, 0], x[:, 1], x[:, 2], color='tab:red', s=20, label='failures')
+        ax3.legend(fontsize=8)
+    ax3.set_xlabel('x [m]')
+    ax3.set_ylabel('y [m]')
+    ax3.set_zlabel('z [m]')
+    ax3.set_title('flange path')
+    fig.suptitle(f'{result.paths} paths, {len(result.blocks)} blocks, '
+                 f'{"success" if result.success else "not disentangled"}')
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=110, bbox_inches='tight')
+    plt.close(fig)
+    return out

@@ -286,7 +286,8 @@ def test_a_killed_planner_gets_its_map_back(ros, tmp_path):
     mock(ros)
     map_file = tmp_path / 'map.json'
     command = [sys.executable, '-m', 'probdis_ros.ros.planner_node', '--ros-args',
-               '-p', f'goal:={GOAL.tolist()}', '-p', f'map_file:={map_file}']
+               '-p', f'goal:={GOAL.tolist()}', '-p', f'map_file:={map_file}',
+               '-p', 'state_timeout:=2.0']
     env = dict(os.environ, ROS_DOMAIN_ID=str(ros.domain))
     first = subprocess.Popen(command, env=env)
     try:

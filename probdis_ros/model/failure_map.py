@@ -55,6 +55,23 @@ class FailureMapError(ValueError):
     """A failure map file or failure that cannot be used, with the reason."""
 
 
+def write_document(path: str | Path, doc: dict) -> None:
+    """Write a map document atomically (temporary file, fsync, rename)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f'.{path.name}.', suffix='.tmp', dir=path.parent)
+    try:
+        with os.fdopen(fd, 'w') as out:
+            json.dump(doc, out, indent=1)
+            out.write('\n')
+            out.flush()
+            os.fsync(out.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
 def unit(vector: np.ndarray, norm: float | None = None) -> np.ndarray:
     """
     Scale to unit length, keeping a vector already of unit length bit for bit.
@@ -146,19 +163,7 @@ class FailureMap:
 
     def save(self, path: str | Path) -> None:
         """Write the map atomically: a crash leaves the old file or the new one, never half."""
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f'.{path.name}.', suffix='.tmp', dir=path.parent)
-        try:
-            with os.fdopen(fd, 'w') as out:
-                json.dump(self.to_dict(), out, indent=1)
-                out.write('\n')
-                out.flush()
-                os.fsync(out.fileno())
-            os.replace(tmp, path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
+        write_document(path, self.to_dict())
 
     @classmethod
     def from_dict(cls, doc: object, source: str = 'failure map') -> FailureMap:

@@ -44,6 +44,26 @@ from probdis_ros.model.failure_map import FailureMap
 DIRECTION_PROBE = 1e-3
 
 
+def failure_from_block(arm: Arm, config: np.ndarray, joint_direction: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """
+    Return the failure (x, v, q) of a motion blocked at config while moving along joint_direction.
+
+    x and q are the end-effector pose there; v is its task-space direction of motion, from a
+    small step back along the joint direction.
+    """
+    norm = float(np.linalg.norm(joint_direction))
+    if norm == 0.0:
+        raise ValueError('a blocked motion needs a nonzero joint direction')
+    before = config - DIRECTION_PROBE * joint_direction / norm
+    pose = arm.fk(np.array([before, config]))
+    v = pose.positions[1] - pose.positions[0]
+    if np.linalg.norm(v) < 1e-12:   # singular configuration: use the whole edge's motion
+        v = arm.fk(config + joint_direction).positions[0] - pose.positions[1]
+    q = None if pose.orientations is None else pose.orientations[1]
+    return pose.positions[1], v, q
+
+
 class State(str, Enum):
     """Where the loop is."""
 
@@ -170,16 +190,7 @@ class Disentangler:
     def failure_at(self, config: np.ndarray, joint_direction: np.ndarray
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
         """Return the failure (x, v, q) of a block at config, moving along joint_direction."""
-        norm = float(np.linalg.norm(joint_direction))
-        if norm == 0.0:
-            raise ValueError('a blocked motion needs a nonzero joint direction')
-        before = config - DIRECTION_PROBE * joint_direction / norm
-        pose = self.arm.fk(np.array([before, config]))
-        v = pose.positions[1] - pose.positions[0]
-        if np.linalg.norm(v) < 1e-12:   # singular configuration: use the whole edge's motion
-            v = self.arm.fk(config + joint_direction).positions[0] - pose.positions[1]
-        q = None if pose.orientations is None else pose.orientations[1]
-        return pose.positions[1], v, q
+        return failure_from_block(self.arm, config, joint_direction)
 
     def report_retreated(self, current: np.ndarray) -> None:
         """Report that the retreat ended (or stopped); the next plan starts from current."""

@@ -39,10 +39,12 @@ import time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 import numpy as np
 from probdis_ros.model import FailureMap, FailureMapError, iiwa_arm
+from probdis_ros.model.failure_map import write_document
 from probdis_ros.planning import Disentangler, make_planner, METHODS, RRTSettings, State
 from probdis_ros.ros.markers import markers_msg
 from probdis_ros.ros.messages import BadJointStateError, hold_msg, joint_positions, trajectory_msg
 from probdis_ros.ros.monitor import BlockDetector, DetectorSettings, Verdict
+from probdis_ros.ros.recorder import BagRecorder
 from probdis_ros.ros.trajectory import nearest_segment, time_path
 from rcl_interfaces.msg import (
     FloatingPointRange,
@@ -51,8 +53,10 @@ from rcl_interfaces.msg import (
     SetParametersResult,
 )
 import rclpy
+from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, qos_profile_sensor_data, QoSProfile
+from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
@@ -112,6 +116,9 @@ PARAMETERS = {
     'map_file': (default_map_file(), ParameterDescriptor(
         description='failure map file, written after every failure and read at start-up; '
                     'empty: keep the map in memory only')),
+    'bag_dir': (os.path.join(os.path.dirname(default_map_file()), 'bags'), ParameterDescriptor(
+        description='each run is recorded to a rosbag2 bag (MCAP) in this folder; '
+                    'empty: no recording')),
     'orientation': (True, ParameterDescriptor(
         description='model the flange orientation in the failure map (3-D with orientation)')),
 }
@@ -150,14 +157,33 @@ class PlannerNode(Node):
         self.latencies: list[float] = []
         self.last_plan_time = 0.0
         self.worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix='probdis_plan')
+        self.io = ThreadPoolExecutor(max_workers=1, thread_name_prefix='probdis_io')
         self.traj_pub = self.create_publisher(
             JointTrajectory, self.get_parameter('trajectory_topic').value, 10)
         latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self.status_pub = self.create_publisher(String, '~/status', latched)
         self.diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self.marker_pub = self.create_publisher(MarkerArray, '~/markers', latched)
+        # joint states arrive raw: the same bytes feed the detector and the bag, so a replay
+        # sees exactly what the live planner saw (sensor-data QoS; a short queue keeps the
+        # newest states first at 1 kHz instead of a growing backlog)
+        states_qos = QoSProfile(depth=10, reliability=qos_profile_sensor_data.reliability,
+                                durability=qos_profile_sensor_data.durability)
         self.create_subscription(JointState, self.get_parameter('joint_states_topic').value,
-                                 self._on_joint_state, qos_profile_sensor_data)
+                                 self._on_joint_state, states_qos, raw=True)
+        self.failure_pub = self.create_publisher(String, '~/failures', 10)
+        self.recorder: BagRecorder | None = None
+        self.recorder_close_at: float | None = None
+        self.bag_path = ''
+        self._record_topics = [
+            (self.get_parameter('joint_states_topic').value, JointState, None),
+            (self.get_parameter('trajectory_topic').value, JointTrajectory, 100),
+            (f'{self.get_fully_qualified_name()}/status', String, latched),
+            (f'{self.get_fully_qualified_name()}/failures', String, 100)]
+        for topic, msg_type, qos in self._record_topics[1:]:
+            self.create_subscription(msg_type, topic,
+                                     lambda data, info, t=topic: self._record(t, data, info),
+                                     qos, raw=True)
         self.create_service(Trigger, '~/start', self._on_start)
         self.create_service(Trigger, '~/stop', self._on_stop)
         self.create_service(Trigger, '~/reset_map', self._on_reset_map)
@@ -208,12 +234,22 @@ class PlannerNode(Node):
         return FailureMap(self.arm.task_space, c_fail)
 
     def _save_map(self) -> None:
+        """Write the map in the I/O thread (a snapshot, in order), off the executor thread."""
         path = self.get_parameter('map_file').value
         if path:
-            try:
-                self.fmap.save(path)
-            except OSError as err:
-                self.get_logger().error(f'cannot write the failure map {path}: {err}')
+            self.io.submit(self._write_map, path, self.fmap.to_dict())
+
+    def _write_map(self, path: str, doc: dict) -> None:
+        try:
+            write_document(path, doc)
+        except OSError as err:
+            self.get_logger().error(f'cannot write the failure map {path}: {err}')
+
+    def _publish_markers(self, path: np.ndarray | None) -> None:
+        """Build and publish the RViz markers in the I/O thread (they take milliseconds)."""
+        fmap = FailureMap.from_dict(self.fmap.to_dict())
+        self.io.submit(lambda: self.marker_pub.publish(
+            markers_msg(self.arm, fmap, path, self.get_clock())))
 
     # -- services ----------------------------------------------------------------------
 
@@ -242,8 +278,45 @@ class PlannerNode(Node):
                                  seed=self.get_parameter('seed').value,
                                  goal_tolerance=self.get_parameter('goal_tolerance').value)
         self.latencies, self.outcome = [], ''
+        self._open_bag()
         self._plan_from(self.measured)
         return True, f'disentangling from {np.round(self.measured, 3).tolist()}'
+
+    # -- recording -----------------------------------------------------------------------
+
+    def _open_bag(self) -> None:
+        self._close_bag()
+        folder = self.get_parameter('bag_dir').value
+        if not folder:
+            return
+        name = time.strftime('run_%Y%m%d_%H%M%S')
+        path = Path(folder) / name
+        suffix = 1
+        while path.exists():
+            suffix += 1
+            path = Path(folder) / f'{name}_{suffix}'
+        try:
+            self.recorder = BagRecorder(path)
+        except OSError as err:
+            self.get_logger().error(f'cannot record to {path}: {err}')
+            return
+        for topic, msg_type, _ in self._record_topics:
+            module = msg_type.__module__.split('.')[0]
+            self.recorder.add_topic(topic, f'{module}/msg/{msg_type.__name__}')
+        self.bag_path = str(path)
+
+    def _record(self, topic: str, data: bytes, info: dict) -> None:
+        """Store a message stamped with its DDS receive time, the detector's time base."""
+        if self.recorder is not None:
+            stamp = info.get('received_timestamp') or self.get_clock().now().nanoseconds
+            self.recorder.write(topic, stamp, data)
+
+    def _close_bag(self) -> None:
+        if self.recorder is not None:
+            recorder, self.recorder = self.recorder, None
+            recorder.close()
+            self.get_logger().info(f'recorded {recorder.count} messages to {recorder.path}')
+        self.recorder_close_at = None
 
     def _make_planner(self):
         settings = RRTSettings(
@@ -293,6 +366,8 @@ class PlannerNode(Node):
 
     def _tick(self) -> None:
         now = self._now()
+        if self.recorder_close_at is not None and now >= self.recorder_close_at:
+            self._close_bag()
         if self.active and now - self.measured_at > self.get_parameter('state_timeout').value:
             self._finish(State.STOPPED, f'joint states stopped arriving: none for '
                          f'{now - self.measured_at:.2f} s (state_timeout)')
@@ -334,14 +409,20 @@ class PlannerNode(Node):
         self.detector = BlockDetector(timed, now, self._detector_settings())
         self.phase = 'executing'
         self.retreat_done_at = None
-        self.marker_pub.publish(markers_msg(self.arm, self.fmap, path, self.get_clock()))
+        self._publish_markers(path)
         self._publish_status()
 
     def _detector_settings(self) -> DetectorSettings:
         return DetectorSettings(d_dist=self.get_parameter('d_dist').value,
                                 stall_time=self.get_parameter('stall_time').value)
 
-    def _on_joint_state(self, msg: JointState) -> None:
+    def _on_joint_state(self, data: bytes, info: dict) -> None:
+        self._record(self._record_topics[0][0], data, info)
+        try:
+            msg = deserialize_message(data, JointState)
+        except Exception as err:   # undecodable bytes must not stop the node
+            self.get_logger().error(f'joint state undecodable: {err}', throttle_duration_sec=1.0)
+            return
         try:
             q = joint_positions(msg, self.joint_names)
         except BadJointStateError as err:
@@ -350,7 +431,10 @@ class PlannerNode(Node):
             if self.active:
                 self._finish(State.STOPPED, f'malformed joint state: {err}')
             return
-        now = self._now()
+        # the DDS receive time: independent of how busy the executor is, and the stamp the
+        # recorder gives the same message, so replay sees exactly these times
+        received = info.get('received_timestamp')
+        now = received * 1e-9 if received else self._now()
         self.measured, self.measured_at = q, now
         if self.hold_on_next_state:
             self._hold()
@@ -379,6 +463,10 @@ class PlannerNode(Node):
         path = self.loop.attempts[-1].path
         segment = nearest_segment(path, q)
         retreat = self.loop.report_blocked(q, segment)
+        x, v, qf = self.fmap.points[-1], self.fmap.directions[-1], self.fmap.orientations[-1]
+        self.failure_pub.publish(String(data=json.dumps(
+            {'t': now, 'x': x.tolist(), 'v': v.tolist(), 'q': qf.tolist(),
+             'segment': segment})))
         self._save_map()
         self.block_time = now
         timed = time_path(retreat, self.arm.velocity_limits,
@@ -397,7 +485,7 @@ class PlannerNode(Node):
             return
         self.plan_started = time.perf_counter()
         self.plan_future = self.worker.submit(self.loop.next_path, retreat[-1].copy())
-        self.marker_pub.publish(markers_msg(self.arm, self.fmap, None, self.get_clock()))
+        self._publish_markers(None)
         self._publish_status()
 
     def _finish(self, state: State, message: str) -> None:
@@ -415,6 +503,7 @@ class PlannerNode(Node):
             self.hold_on_next_state = True
         self.get_logger().info(f'run ended: {self.outcome}: {message}')
         self._publish_status()
+        self.recorder_close_at = self._now() + 0.5   # the last status and hold go in too
 
     def _hold(self) -> None:
         if self.measured is not None:
@@ -434,6 +523,7 @@ class PlannerNode(Node):
             'replan_latencies_s': self.latencies,
             'outcome': self.outcome,
             'message': self.message,
+            'bag': self.bag_path,
         }
 
     def _publish_status(self) -> None:
@@ -454,8 +544,10 @@ class PlannerNode(Node):
         self.diag_pub.publish(msg)
 
     def destroy_node(self) -> None:
-        """Stop the worker thread with the node."""
+        """Close the bag and stop the worker thread with the node."""
+        self._close_bag()
         self.worker.shutdown(wait=False, cancel_futures=True)
+        self.io.shutdown(wait=True)     # the last map write finishes
         super().destroy_node()
 
 
@@ -466,8 +558,8 @@ def main(args: list[str] | None = None) -> int:
     try:
         node = PlannerNode()
         rclpy.spin(node)
-    except KeyboardInterrupt:
-        pass
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass                 # SIGINT / SIGTERM: the bag is closed below
     except (ValueError, FileNotFoundError) as err:
         print(f'{NODE_NAME}: error: {err}', file=sys.stderr)
         return 2

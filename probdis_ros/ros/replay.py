@@ -1,0 +1,192 @@
+# Copyright 2026 probdis_ros contributors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+``probdis replay``: rerun the blocked-motion detector on a recorded bag.
+
+Any rosbag2 bag (MCAP or sqlite3, metadata v8 or v9, written by probdis or by
+``ros2 bag record`` on the real arm) with joint states and commanded trajectories: the same
+detector as the live planner (:class:`probdis_ros.ros.monitor.BlockDetector`) judges every
+command against the joint states that followed it, and every block becomes a failure, so the
+failure map is rebuilt exactly as the planner built it.  No rclpy: bag I/O is rosbags'.
+
+Commands are classified like the planner sends them: a one-point command at the measured
+position is a hold, the first motion after a block is the retreat, every other motion is a
+planned path.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+import json
+from pathlib import Path
+
+import numpy as np
+from probdis_ros.model import FailureMap, iiwa_arm
+from probdis_ros.planning.disentangle import failure_from_block
+from probdis_ros.ros.messages import BadJointStateError, joint_positions, timed_path_from_msg
+from probdis_ros.ros.monitor import BlockDetector, DetectorSettings, Verdict
+from probdis_ros.ros.trajectory import nearest_segment
+from rosbags.highlevel import AnyReader
+
+JOINT_STATES = '/lbr/joint_states'
+TRAJECTORY = '/lbr/joint_trajectory_controller/joint_trajectory'
+JOINTS = [f'lbr_A{i}' for i in range(1, 8)]
+
+
+class ReplayError(Exception):
+    """A bag that cannot be replayed (with what was readable before the problem)."""
+
+    def __init__(self, message: str, partial: ReplayResult | None = None) -> None:
+        super().__init__(message)
+        self.partial = partial
+
+
+@dataclass
+class Block:
+    """A detected block: time since the bag's start [s], configuration, flange, segment."""
+
+    t: float
+    config: np.ndarray
+    x: np.ndarray
+    segment: int
+
+
+@dataclass
+class ReplayResult:
+    """What the detector found in a bag."""
+
+    runs: int = 0
+    paths: int = 0
+    success: bool = False
+    blocks: list[Block] = field(default_factory=list)
+    fmap: FailureMap | None = None
+    times: list[float] = field(default_factory=list)
+    gaps: list[float] = field(default_factory=list)
+    configs: list[np.ndarray] = field(default_factory=list)
+    problems: list[str] = field(default_factory=list)
+
+    def summary(self) -> dict:
+        """Return the JSON summary of ``probdis replay --json``."""
+        return {'paths': self.paths,
+                'blocks': [{'t': b.t, 'x': b.x.tolist()} for b in self.blocks],
+                'failures': len(self.fmap) if self.fmap is not None else 0,
+                'success': self.success}
+
+
+def replay(bag: str | Path, joint_states_topic: str = JOINT_STATES,
+           trajectory_topic: str = TRAJECTORY, joint_names: list[str] | None = None,
+           settings: DetectorSettings | None = None, orientation: bool = True) -> ReplayResult:
+    """Replay a bag; raise ReplayError (carrying the partial result) on a damaged bag."""
+    names = joint_names or JOINTS
+    arm = iiwa_arm(with_orientation=orientation)
+    settings = settings or DetectorSettings()
+    result = ReplayResult(fmap=FailureMap(arm.task_space))
+    path = Path(bag)
+    if not path.exists():
+        raise ReplayError(f'{path}: no such bag')
+    try:
+        reader = AnyReader([path])
+        reader.open()
+    except Exception as err:   # rosbags raises several types for a non-bag
+        raise ReplayError(f'{path}: not a readable rosbag2 bag ({err})') from None
+    try:
+        topics = {c.topic: c for c in reader.connections}
+        for topic in (joint_states_topic, trajectory_topic):
+            if topic not in topics:
+                raise ReplayError(f'{path}: no {topic} topic (the bag has '
+                                  f'{", ".join(sorted(topics)) or "no topics"})')
+        status = [c for c in reader.connections if c.topic.endswith('/probdis_planner/status')]
+        wanted = [topics[joint_states_topic], topics[trajectory_topic], *status]
+        try:
+            _run(reader, wanted, topics[trajectory_topic], status, names, arm, settings, result,
+                 reader.start_time * 1e-9)
+        except ReplayError:
+            raise
+        except Exception as err:
+            raise ReplayError(f'{path}: damaged bag after {len(result.times)} joint states '
+                              f'({err})', result) from None
+    finally:
+        reader.close()
+    if result.runs == 0 and result.paths:
+        result.runs = 1
+    return result
+
+
+def _run(reader, connections, trajectory_conn, status_conns, names, arm, settings,
+         result: ReplayResult, t0: float) -> None:
+    measured = None
+    detector = None
+    kind = ''
+    after_block = False
+    last_path_done = False
+    path = None
+    for conn, stamp, raw in reader.messages(connections=connections):
+        t = stamp * 1e-9 - t0
+        msg = reader.deserialize(raw, conn.msgtype)
+        if conn in status_conns:
+            state = json.loads(msg.data)
+            if state.get('state') == 'planning' and state.get('paths') == 0:
+                result.runs += 1
+            continue
+        if conn is trajectory_conn:
+            if measured is None:
+                result.problems.append(f'{t:.3f} s: command before any joint state, skipped')
+                continue
+            try:
+                timed = timed_path_from_msg(msg, names, measured, arm.lower, arm.upper)
+            except ValueError as err:
+                result.problems.append(f'{t:.3f} s: command refused: {err}')
+                continue
+            if len(timed.points) == 2 and np.abs(timed.points[1] - measured).sum() <= \
+                    settings.d_dist:
+                detector, kind = None, 'hold'
+                continue
+            if after_block:
+                kind, after_block = 'retreat', False
+            else:
+                kind = 'path'
+                result.paths += 1
+                last_path_done = False
+            path = timed
+            detector = BlockDetector(timed, t, settings)
+            continue
+        try:
+            q = joint_positions(msg, names)
+        except BadJointStateError as err:
+            result.problems.append(f'{t:.3f} s: joint state refused: {err}')
+            continue
+        measured = q
+        result.times.append(t)
+        result.configs.append(q)
+        if detector is None:
+            result.gaps.append(0.0)
+            continue
+        verdict = detector.update(t, q)
+        result.gaps.append(detector.gap)
+        if verdict is Verdict.DONE:
+            if kind == 'path':
+                last_path_done = True
+            detector = None
+        elif verdict is Verdict.BLOCKED:
+            detector = None
+            if kind != 'path':
+                continue
+            segment = nearest_segment(path.points, q)
+            direction = path.points[segment + 1] - path.points[segment]
+            x, v, quat = failure_from_block(arm, q, direction)
+            result.fmap.add(x, v, quat)
+            result.blocks.append(Block(t, q.copy(), x, segment))
+            after_block = True
+    result.success = last_path_done
