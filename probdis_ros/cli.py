@@ -225,6 +225,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
         print(f'demo: {outcome} after {result["paths"]} path(s), {result["failures"]} '
               f'failure(s); replan latency median {latency["median"]:.3f} s, '
               f'max {latency["max"]:.3f} s')
+        if result['bag']:
+            print(f'recorded to {result["bag"]} (probdis replay {result["bag"]})')
     return 0 if result['success'] else 1
 
 

@@ -112,4 +112,4 @@ def run_demo(scenario: str = 'demo_iiwa', timeout: float = 300.0, quiet: bool = 
             'failures': status.get('failures', 0),
             'replan_latency_s': {'median': statistics.median(latencies),
                                  'max': max(latencies)},
-            'exit_codes': codes}
+            'exit_codes': codes, 'bag': status.get('bag', '')}

@@ -33,9 +33,9 @@ import numpy as np
 from probdis_ros.model import iiwa_arm
 from probdis_ros.resources import scenario_path
 from probdis_ros.ros.messages import timed_path_from_msg
+from probdis_ros.ros.node_main import run_node
 from probdis_ros.sim.worlds import load_world
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
-import rclpy
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import JointState
@@ -130,22 +130,8 @@ class MockIiwa(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    """Run the mock iiwa node until SIGINT."""
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = MockIiwa()
-        rclpy.spin(node)
-    except KeyboardInterrupt:
-        pass
-    except (ValueError, FileNotFoundError) as err:
-        print(f'mock_iiwa: error: {err}', file=sys.stderr)
-        return 2
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    """Run the mock iiwa node until SIGINT or SIGTERM."""
+    return run_node('mock_iiwa', MockIiwa, args)
 
 
 if __name__ == '__main__':

@@ -44,6 +44,7 @@ from probdis_ros.planning import Disentangler, make_planner, METHODS, RRTSetting
 from probdis_ros.ros.markers import markers_msg
 from probdis_ros.ros.messages import BadJointStateError, hold_msg, joint_positions, trajectory_msg
 from probdis_ros.ros.monitor import BlockDetector, DetectorSettings, Verdict
+from probdis_ros.ros.node_main import run_node
 from probdis_ros.ros.recorder import BagRecorder
 from probdis_ros.ros.trajectory import nearest_segment, time_path
 from rcl_interfaces.msg import (
@@ -52,8 +53,6 @@ from rcl_interfaces.msg import (
     ParameterDescriptor,
     SetParametersResult,
 )
-import rclpy
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, qos_profile_sensor_data, QoSProfile
 from rclpy.serialization import deserialize_message
@@ -552,22 +551,8 @@ class PlannerNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    """Run the planner node until SIGINT or SIGTERM."""
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = PlannerNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass                 # SIGINT / SIGTERM: the bag is closed below
-    except (ValueError, FileNotFoundError) as err:
-        print(f'{NODE_NAME}: error: {err}', file=sys.stderr)
-        return 2
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    """Run the planner node until SIGINT or SIGTERM (the bag is closed either way)."""
+    return run_node(NODE_NAME, PlannerNode, args)
 
 
 if __name__ == '__main__':
