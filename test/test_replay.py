@@ -192,3 +192,21 @@ def test_the_bag_is_readable_after_the_node_is_killed_mid_run(tmp_path, sig):
     assert len(bags) == 1 and (bags[0] / 'metadata.yaml').exists()
     result = replay(bags[0])
     assert result.paths >= 1 and len(result.blocks) >= 1
+
+
+def test_nan_joint_states_are_reported_and_skipped(tmp_path):
+    messages, _, _ = simulated_run()
+    nan = js_bytes([f'lbr_A{i}' for i in range(1, 8)], [float('nan')] * 7, 1.5)
+    write_bag(tmp_path / 'bag', [*messages, (int(1.5e9) + 1, JS, nan)], 9, StoragePlugin.MCAP)
+    result = replay(tmp_path / 'bag')
+    assert len(result.blocks) == 1
+    assert any('non-finite' in p for p in result.problems)
+
+
+def test_a_truncated_bag_is_a_clear_error(tmp_path):
+    messages, _, _ = simulated_run()
+    write_bag(tmp_path / 'bag', messages, 9, StoragePlugin.MCAP)
+    data = (tmp_path / 'bag' / 'bag.mcap').read_bytes()
+    (tmp_path / 'bag' / 'bag.mcap').write_bytes(data[: len(data) // 2])
+    with pytest.raises(ReplayError, match='not a readable rosbag2 bag'):
+        replay(tmp_path / 'bag')
