@@ -314,7 +314,11 @@ class PlannerNode(Node):
         if self.recorder is not None:
             recorder, self.recorder = self.recorder, None
             recorder.close()
-            self.get_logger().info(f'recorded {recorder.count} messages to {recorder.path}')
+            message = f'recorded {recorder.count} messages to {recorder.path}'
+            if self.context.ok():
+                self.get_logger().info(message)
+            else:                 # shutting down after SIGINT/SIGTERM: rosout is gone
+                print(f'[{NODE_NAME}] {message}', file=sys.stderr)
         self.recorder_close_at = None
 
     def _make_planner(self):
