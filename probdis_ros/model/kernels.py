@@ -31,51 +31,15 @@ def chain_kernel(q: np.ndarray, offsets: np.ndarray, bases: np.ndarray, tip_offs
     Forward kinematics of a revolute chain for every row of q.
 
     Joint j moves its child frame by ``offsets[j]`` in the parent frame and rotates it by
-    ``bases[j, 0] + cos(q_j) bases[j, 1] + sin(q_j) bases[j, 2]`` (each 3x3).  The rotation
-    lives in nine scalars so that the loop stays in registers.
+    ``bases[j, 0] + cos(q_j) bases[j, 1] + sin(q_j) bases[j, 2]`` (each 3x3).
     """
+    cs = np.empty(q.shape[1])
+    sn = np.empty(q.shape[1])
     for k in range(q.shape[0]):
-        px = py = pz = 0.0
-        r00, r01, r02 = 1.0, 0.0, 0.0
-        r10, r11, r12 = 0.0, 1.0, 0.0
-        r20, r21, r22 = 0.0, 0.0, 1.0
-        for j in range(offsets.shape[0]):
-            ox, oy, oz = offsets[j, 0], offsets[j, 1], offsets[j, 2]
-            px += r00 * ox + r01 * oy + r02 * oz
-            py += r10 * ox + r11 * oy + r12 * oz
-            pz += r20 * ox + r21 * oy + r22 * oz
-            c = np.cos(q[k, j])
-            s = np.sin(q[k, j])
-            b = bases[j]
-            m00 = b[0, 0, 0] + c * b[1, 0, 0] + s * b[2, 0, 0]
-            m01 = b[0, 0, 1] + c * b[1, 0, 1] + s * b[2, 0, 1]
-            m02 = b[0, 0, 2] + c * b[1, 0, 2] + s * b[2, 0, 2]
-            m10 = b[0, 1, 0] + c * b[1, 1, 0] + s * b[2, 1, 0]
-            m11 = b[0, 1, 1] + c * b[1, 1, 1] + s * b[2, 1, 1]
-            m12 = b[0, 1, 2] + c * b[1, 1, 2] + s * b[2, 1, 2]
-            m20 = b[0, 2, 0] + c * b[1, 2, 0] + s * b[2, 2, 0]
-            m21 = b[0, 2, 1] + c * b[1, 2, 1] + s * b[2, 2, 1]
-            m22 = b[0, 2, 2] + c * b[1, 2, 2] + s * b[2, 2, 2]
-            r00, r01, r02 = (r00 * m00 + r01 * m10 + r02 * m20, r00 * m01 + r01 * m11 + r02 * m21,
-                             r00 * m02 + r01 * m12 + r02 * m22)
-            r10, r11, r12 = (r10 * m00 + r11 * m10 + r12 * m20, r10 * m01 + r11 * m11 + r12 * m21,
-                             r10 * m02 + r11 * m12 + r12 * m22)
-            r20, r21, r22 = (r20 * m00 + r21 * m10 + r22 * m20, r20 * m01 + r21 * m11 + r22 * m21,
-                             r20 * m02 + r21 * m12 + r22 * m22)
-        ox, oy, oz = tip_offset[0], tip_offset[1], tip_offset[2]
-        pos_out[k, 0] = px + r00 * ox + r01 * oy + r02 * oz
-        pos_out[k, 1] = py + r10 * ox + r11 * oy + r12 * oz
-        pos_out[k, 2] = pz + r20 * ox + r21 * oy + r22 * oz
-        t = tip_rotation
-        rot_out[k, 0, 0] = r00 * t[0, 0] + r01 * t[1, 0] + r02 * t[2, 0]
-        rot_out[k, 0, 1] = r00 * t[0, 1] + r01 * t[1, 1] + r02 * t[2, 1]
-        rot_out[k, 0, 2] = r00 * t[0, 2] + r01 * t[1, 2] + r02 * t[2, 2]
-        rot_out[k, 1, 0] = r10 * t[0, 0] + r11 * t[1, 0] + r12 * t[2, 0]
-        rot_out[k, 1, 1] = r10 * t[0, 1] + r11 * t[1, 1] + r12 * t[2, 1]
-        rot_out[k, 1, 2] = r10 * t[0, 2] + r11 * t[1, 2] + r12 * t[2, 2]
-        rot_out[k, 2, 0] = r20 * t[0, 0] + r21 * t[1, 0] + r22 * t[2, 0]
-        rot_out[k, 2, 1] = r20 * t[0, 1] + r21 * t[1, 1] + r22 * t[2, 1]
-        rot_out[k, 2, 2] = r20 * t[0, 2] + r21 * t[1, 2] + r22 * t[2, 2]
+        for j in range(q.shape[1]):
+            cs[j] = np.cos(q[k, j])
+            sn[j] = np.sin(q[k, j])
+        _chain_pose(cs, sn, offsets, bases, tip_offset, tip_rotation, pos_out, rot_out, k)
 
 
 @numba.njit(cache=True)
@@ -162,44 +126,43 @@ def _chunk_poses(cs, sn, cd, sd, b, k0, count, n, kind, joint_params, offsets, b
             _axis_chain_pose(cs, sn, joint_params, offsets, tip_offset, tip_rotation, pos, rot,
                              i)
             continue
-        px = py = pz = 0.0
-        r00, r01, r02 = 1.0, 0.0, 0.0
-        r10, r11, r12 = 0.0, 1.0, 0.0
-        r20, r21, r22 = 0.0, 0.0, 1.0
-        for j in range(offsets.shape[0]):
-            ox, oy, oz = offsets[j, 0], offsets[j, 1], offsets[j, 2]
-            px += r00 * ox + r01 * oy + r02 * oz
-            py += r10 * ox + r11 * oy + r12 * oz
-            pz += r20 * ox + r21 * oy + r22 * oz
-            c = cs[j]
-            s = sn[j]
-            m00 = bases[j, 0, 0, 0] + c * bases[j, 1, 0, 0] + s * bases[j, 2, 0, 0]
-            m01 = bases[j, 0, 0, 1] + c * bases[j, 1, 0, 1] + s * bases[j, 2, 0, 1]
-            m02 = bases[j, 0, 0, 2] + c * bases[j, 1, 0, 2] + s * bases[j, 2, 0, 2]
-            m10 = bases[j, 0, 1, 0] + c * bases[j, 1, 1, 0] + s * bases[j, 2, 1, 0]
-            m11 = bases[j, 0, 1, 1] + c * bases[j, 1, 1, 1] + s * bases[j, 2, 1, 1]
-            m12 = bases[j, 0, 1, 2] + c * bases[j, 1, 1, 2] + s * bases[j, 2, 1, 2]
-            m20 = bases[j, 0, 2, 0] + c * bases[j, 1, 2, 0] + s * bases[j, 2, 2, 0]
-            m21 = bases[j, 0, 2, 1] + c * bases[j, 1, 2, 1] + s * bases[j, 2, 2, 1]
-            m22 = bases[j, 0, 2, 2] + c * bases[j, 1, 2, 2] + s * bases[j, 2, 2, 2]
-            r00, r01, r02 = (r00 * m00 + r01 * m10 + r02 * m20,
-                             r00 * m01 + r01 * m11 + r02 * m21,
-                             r00 * m02 + r01 * m12 + r02 * m22)
-            r10, r11, r12 = (r10 * m00 + r11 * m10 + r12 * m20,
-                             r10 * m01 + r11 * m11 + r12 * m21,
-                             r10 * m02 + r11 * m12 + r12 * m22)
-            r20, r21, r22 = (r20 * m00 + r21 * m10 + r22 * m20,
-                             r20 * m01 + r21 * m11 + r22 * m21,
-                             r20 * m02 + r21 * m12 + r22 * m22)
-        ox, oy, oz = tip_offset[0], tip_offset[1], tip_offset[2]
-        pos[i, 0] = px + r00 * ox + r01 * oy + r02 * oz
-        pos[i, 1] = py + r10 * ox + r11 * oy + r12 * oz
-        pos[i, 2] = pz + r20 * ox + r21 * oy + r22 * oz
-        for c in range(3):
-            t0, t1, t2 = tip_rotation[0, c], tip_rotation[1, c], tip_rotation[2, c]
-            rot[i, 0, c] = r00 * t0 + r01 * t1 + r02 * t2
-            rot[i, 1, c] = r10 * t0 + r11 * t1 + r12 * t2
-            rot[i, 2, c] = r20 * t0 + r21 * t1 + r22 * t2
+        _chain_pose(cs, sn, offsets, bases, tip_offset, tip_rotation, pos, rot, i)
+
+
+@numba.njit(cache=True, inline='always')
+def _chain_pose(cs, sn, offsets, bases, tip_offset, tip_rotation, pos, rot, i):
+    """Write pose i of a CHAIN arm from its joint cosines and sines."""
+    px = py = pz = 0.0
+    r00, r01, r02 = 1.0, 0.0, 0.0
+    r10, r11, r12 = 0.0, 1.0, 0.0
+    r20, r21, r22 = 0.0, 0.0, 1.0
+    for j in range(offsets.shape[0]):
+        ox, oy, oz = offsets[j, 0], offsets[j, 1], offsets[j, 2]
+        px += r00 * ox + r01 * oy + r02 * oz
+        py += r10 * ox + r11 * oy + r12 * oz
+        pz += r20 * ox + r21 * oy + r22 * oz
+        c = cs[j]
+        s = sn[j]
+        m00 = bases[j, 0, 0, 0] + c * bases[j, 1, 0, 0] + s * bases[j, 2, 0, 0]
+        m01 = bases[j, 0, 0, 1] + c * bases[j, 1, 0, 1] + s * bases[j, 2, 0, 1]
+        m02 = bases[j, 0, 0, 2] + c * bases[j, 1, 0, 2] + s * bases[j, 2, 0, 2]
+        m10 = bases[j, 0, 1, 0] + c * bases[j, 1, 1, 0] + s * bases[j, 2, 1, 0]
+        m11 = bases[j, 0, 1, 1] + c * bases[j, 1, 1, 1] + s * bases[j, 2, 1, 1]
+        m12 = bases[j, 0, 1, 2] + c * bases[j, 1, 1, 2] + s * bases[j, 2, 1, 2]
+        m20 = bases[j, 0, 2, 0] + c * bases[j, 1, 2, 0] + s * bases[j, 2, 2, 0]
+        m21 = bases[j, 0, 2, 1] + c * bases[j, 1, 2, 1] + s * bases[j, 2, 2, 1]
+        m22 = bases[j, 0, 2, 2] + c * bases[j, 1, 2, 2] + s * bases[j, 2, 2, 2]
+        r00, r01, r02 = (r00 * m00 + r01 * m10 + r02 * m20,
+                         r00 * m01 + r01 * m11 + r02 * m21,
+                         r00 * m02 + r01 * m12 + r02 * m22)
+        r10, r11, r12 = (r10 * m00 + r11 * m10 + r12 * m20,
+                         r10 * m01 + r11 * m11 + r12 * m21,
+                         r10 * m02 + r11 * m12 + r12 * m22)
+        r20, r21, r22 = (r20 * m00 + r21 * m10 + r22 * m20,
+                         r20 * m01 + r21 * m11 + r22 * m21,
+                         r20 * m02 + r21 * m12 + r22 * m22)
+    _tip_pose(px, py, pz, r00, r01, r02, r10, r11, r12, r20, r21, r22, tip_offset,
+              tip_rotation, pos, rot, i)
 
 
 @numba.njit(cache=True, inline='always')
@@ -230,6 +193,14 @@ def _axis_chain_pose(cs, sn, codes, offsets, tip_offset, tip_rotation, pos, rot,
             r01, r02 = r01 * c + r02 * s, r02 * c - r01 * s
             r11, r12 = r11 * c + r12 * s, r12 * c - r11 * s
             r21, r22 = r21 * c + r22 * s, r22 * c - r21 * s
+    _tip_pose(px, py, pz, r00, r01, r02, r10, r11, r12, r20, r21, r22, tip_offset,
+              tip_rotation, pos, rot, i)
+
+
+@numba.njit(cache=True, inline='always')
+def _tip_pose(px, py, pz, r00, r01, r02, r10, r11, r12, r20, r21, r22, tip_offset,
+              tip_rotation, pos, rot, i):
+    """Write pose i: the last joint frame (p, R) moved to the tip by the fixed tip transform."""
     ox, oy, oz = tip_offset[0], tip_offset[1], tip_offset[2]
     pos[i, 0] = px + r00 * ox + r01 * oy + r02 * oz
     pos[i, 1] = py + r10 * ox + r11 * oy + r12 * oz
