@@ -37,6 +37,16 @@ def _print_json(doc: dict) -> None:
     print(json.dumps(doc))
 
 
+def _print_doc(doc: dict, as_json: bool) -> None:
+    """Print a document as one JSON object, or as aligned 'key: value' lines."""
+    if as_json:
+        _print_json(doc)
+        return
+    width = max(map(len, doc), default=0)
+    for key, value in doc.items():
+        print(f'{key:>{width}}: {value}')
+
+
 def cmd_info(args: argparse.Namespace) -> int:
     """Print the version and where the config and URDF files were found."""
     from probdis_ros import __version__
@@ -45,11 +55,7 @@ def cmd_info(args: argparse.Namespace) -> int:
     how, share = share_dir()
     doc = {'version': __version__, 'share': str(share), 'found_by': how,
            'config': str(share / 'config'), 'urdf': str(share / 'urdf' / 'iiwa14.urdf')}
-    if args.json:
-        _print_json(doc)
-    else:
-        for key, value in doc.items():
-            print(f'{key:>9}: {value}')
+    _print_doc(doc, args.json)
     return 0
 
 
@@ -203,11 +209,7 @@ def cmd_status(args: argparse.Namespace) -> int:
         except TimeoutError as err:
             print(f'probdis status: {err}', file=sys.stderr)
             return 3
-    if args.json:
-        _print_json(doc)
-    else:
-        for key, value in doc.items():
-            print(f'{key:>22}: {value}')
+    _print_doc(doc, args.json)
     return 0
 
 

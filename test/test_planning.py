@@ -27,6 +27,16 @@ START = np.array([np.pi / 2 + 0.6, 0, 0, 0, 0, 0, 0])
 GOAL = np.array([np.pi / 2 - 0.6, 0, 0, 0, 0, 0, 0])
 
 
+def scattered_map(arm, rng, n: int) -> FailureMap:
+    """Return n failures at the end-effector poses of random configurations."""
+    fmap = FailureMap(arm.task_space, 100.0)
+    poses = arm.fk(arm.random_configurations(rng, n))
+    for i in range(n):
+        q = None if poses.orientations is None else poses.orientations[i]
+        fmap.add(poses.positions[i], rng.normal(size=arm.task_space.dim), q)
+    return fmap
+
+
 def wall_map() -> FailureMap:
     """Failures across the straight move, a fifth of the way along, blocking it."""
     fmap = FailureMap(TaskSpace.POINT2, 100.0)
@@ -81,11 +91,7 @@ def test_compiled_costs_give_the_same_plans_as_the_reference(setting):
     """The speed-ups (compiled kernel, stepped trig, exact pruning) change no decision."""
     arm = arm_for_setting(setting)
     rng = np.random.default_rng(3)
-    fmap = FailureMap(arm.task_space, 100.0)
-    poses = arm.fk(arm.random_configurations(rng, 19))
-    for i in range(19):
-        q = None if poses.orientations is None else poses.orientations[i]
-        fmap.add(poses.positions[i], rng.normal(size=arm.task_space.dim), q)
+    fmap = scattered_map(arm, rng, 19)
     settings = RRTSettings(iterations=25)
     start, goal = arm.random_configurations(rng, 2)
     for seed in range(2):
@@ -100,11 +106,7 @@ def test_compiled_edge_costs_match_the_reference():
     for setting in ('2d', '3d', '3d-orient'):
         arm = arm_for_setting(setting)
         rng = np.random.default_rng(4)
-        fmap = FailureMap(arm.task_space, 100.0)
-        poses = arm.fk(arm.random_configurations(rng, 7))
-        for i in range(7):
-            q = None if poses.orientations is None else poses.orientations[i]
-            fmap.add(poses.positions[i], rng.normal(size=arm.task_space.dim), q)
+        fmap = scattered_map(arm, rng, 7)
         sources = arm.random_configurations(rng, 30)
         target = arm.random_configurations(rng, 1)[0]
         for toward in (True, False):
