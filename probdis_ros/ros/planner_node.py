@@ -232,11 +232,12 @@ class PlannerNode(Node):
                 self.get_logger().error(f'{err}; starting with an empty map')
         return FailureMap(self.arm.task_space, c_fail)
 
-    def _save_map(self) -> None:
+    def _save_map(self) -> Future | None:
         """Write the map in the I/O thread (a snapshot, in order), off the executor thread."""
         path = self.get_parameter('map_file').value
         if path:
-            self.io.submit(self._write_map, path, self.fmap.to_dict())
+            return self.io.submit(self._write_map, path, self.fmap.to_dict())
+        return None
 
     def _write_map(self, path: str, doc: dict) -> None:
         try:
@@ -347,7 +348,9 @@ class PlannerNode(Node):
             return response
         count = len(self.fmap)
         self.fmap.clear()
-        self._save_map()
+        written = self._save_map()
+        if written is not None:
+            written.result(timeout=10.0)   # "cleared" means cleared on disk too
         self._publish_status()
         response.success, response.message = True, f'cleared {count} failures'
         return response
