@@ -20,6 +20,7 @@ from collections.abc import Callable
 import sys
 
 import rclpy
+from rclpy._rclpy_pybind11 import RCLError
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 
@@ -33,6 +34,10 @@ def run_node(name: str, factory: Callable[[], Node], args: list[str] | None = No
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass                 # SIGINT / SIGTERM: cleaned up below
+    except RCLError:
+        # a signal can shut the context down while spin is setting up its wait set
+        if rclpy.ok(context=node.context if node is not None else None):
+            raise
     except (ValueError, FileNotFoundError) as err:
         print(f'{name}: error: {err}', file=sys.stderr)
         return 2
