@@ -237,6 +237,8 @@ def cmd_replay(args: argparse.Namespace) -> int:
     from probdis_ros.ros.monitor import DetectorSettings
     from probdis_ros.ros.replay import replay, ReplayError
 
+    if args.publish:
+        return _publish_bag(args)
     settings = DetectorSettings(d_dist=args.d_dist)
     status = 0
     try:
@@ -267,6 +269,29 @@ def cmd_replay(args: argparse.Namespace) -> int:
     if args.plot:
         print(f'wrote {args.plot}')
     return status
+
+
+def _publish_bag(args: argparse.Namespace) -> int:
+    """``probdis replay BAG --publish``: the bag's messages back on their topics."""
+    from probdis_ros.ros.bag_player import play
+    from probdis_ros.ros.bag_source import BagError
+
+    if not args.rate > 0 or args.wait < 0:
+        raise UsageError('--rate must be positive and --wait not negative')
+    try:
+        result = play(args.bag, args.rate, args.wait, progress=sys.stderr.isatty())
+    except BagError as err:
+        raise UsageError(str(err)) from None
+    if args.json:
+        _print_json({'published': result.published, 'skipped': result.skipped,
+                     'seconds': round(result.seconds, 3)})
+    else:
+        print(f'{args.bag}: published {result.published} message(s) in '
+              f'{result.seconds:.1f} s' + (' (interrupted)' if result.interrupted else ''))
+    if result.damage:
+        print(f'probdis replay: error: {args.bag}: {result.damage}', file=sys.stderr)
+        return 1
+    return 130 if result.interrupted else 0
 
 
 def _positive_int(text: str) -> int:
@@ -355,7 +380,7 @@ def build_parser() -> argparse.ArgumentParser:
     demo.set_defaults(handler=cmd_demo)
 
     rp = sub.add_parser('replay', help='rerun the blocked-motion detector on a rosbag2 bag')
-    rp.add_argument('bag', help='a rosbag2 bag folder (MCAP or sqlite3)')
+    rp.add_argument('bag', help='a rosbag2 bag: folder, .mcap or .db3 file')
     rp.add_argument('--joint-states', default='/lbr/joint_states', help='joint-state topic')
     rp.add_argument('--trajectory', default='/lbr/joint_trajectory_controller/joint_trajectory',
                     help='commanded trajectory topic')
@@ -364,6 +389,12 @@ def build_parser() -> argparse.ArgumentParser:
                     help='print {"paths", "blocks": [{"t", "x"}], "failures", "success"}')
     rp.add_argument('--plot', metavar='OUT.png', help='joint gaps and the flange path')
     rp.add_argument('--save-map', metavar='FILE', help='write the rebuilt failure map')
+    rp.add_argument('--publish', action='store_true',
+                    help='republish the messages on their topics with their recorded timing')
+    rp.add_argument('--rate', type=float, default=1.0,
+                    help='with --publish: speed factor of the recorded timing')
+    rp.add_argument('--wait', type=float, default=2.0,
+                    help='with --publish: seconds to wait for subscribers before starting')
     rp.set_defaults(handler=cmd_replay)
 
     fmap = sub.add_parser('map', help='failure maps')

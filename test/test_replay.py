@@ -20,7 +20,9 @@ from pathlib import Path
 import signal
 import subprocess
 import sys
+import time
 
+from conftest import probdis_command
 import numpy as np
 from probdis_ros.model import iiwa_arm
 from probdis_ros.resources import scenario_path
@@ -30,75 +32,103 @@ from probdis_ros.ros.replay import replay, ReplayError
 from probdis_ros.ros.trajectory import time_path
 from probdis_ros.sim.worlds import load_world
 import pytest
+import rclpy
 from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, QoSProfile
 from ros_harness import RosTest, wait_for
 from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import StoragePlugin, Writer
-from rosbags.typesys import get_typestore, Stores
+from rosbags.typesys import get_types_from_msg, get_typestore, Stores
+from rosbags.typesys.base import Nodetype
+from sensor_msgs.msg import JointState
+from std_msgs.msg import String
+from trajectory_msgs.msg import JointTrajectory
 
 WORLD = load_world(scenario_path('demo_iiwa'))
 JS, TRAJ = '/lbr/joint_states', '/lbr/joint_trajectory_controller/joint_trajectory'
 STORE = get_typestore(Stores.ROS2_JAZZY)
+JS_TYPE, TRAJ_TYPE = 'sensor_msgs/msg/JointState', 'trajectory_msgs/msg/JointTrajectory'
 RATE = 100.0
 
 
+def js_message(names, q, stamp):
+    """Return a sensor_msgs/JointState as plain fields (for any writer)."""
+    return {'header': {'stamp': {'sec': int(stamp), 'nanosec': int((stamp % 1) * 1e9)},
+                       'frame_id': ''},
+            'name': list(names), 'position': [float(v) for v in q], 'velocity': [],
+            'effort': []}
+
+
+def traj_message(timed, names):
+    """Return a trajectory_msgs/JointTrajectory as plain fields (for any writer)."""
+    points = [{'positions': [float(v) for v in q], 'velocities': [], 'accelerations': [],
+               'effort': [], 'time_from_start': {'sec': int(s), 'nanosec': int((s % 1) * 1e9)}}
+              for q, s in zip(timed.points[1:], timed.times[1:])]
+    return {'header': {'stamp': {'sec': 0, 'nanosec': 0}, 'frame_id': ''},
+            'joint_names': list(names), 'points': points}
+
+
+def rosbags_bytes(fields, msgtype):
+    """Serialize plain fields with rosbags (nested dicts become rosbags message objects)."""
+    def build(value, typename):
+        cls = STORE.types[typename]
+        kwargs = {}
+        for name, (kind, spec) in STORE.fielddefs[typename][1]:
+            item = value[name]
+            if kind == Nodetype.NAME:
+                kwargs[name] = build(item, spec)
+            elif kind == Nodetype.SEQUENCE and spec[0][0] == Nodetype.NAME:
+                kwargs[name] = [build(x, spec[0][1]) for x in item]
+            elif kind == Nodetype.SEQUENCE and spec[0][1][0] == 'float64':
+                kwargs[name] = np.asarray(item, dtype=float)
+            else:
+                kwargs[name] = item
+        return cls(**kwargs)
+    return STORE.serialize_cdr(build(fields, msgtype), msgtype)
+
+
 def js_bytes(names, q, stamp):
-    t = STORE.types
-    msg = t['sensor_msgs/msg/JointState'](
-        header=t['std_msgs/msg/Header'](stamp=t['builtin_interfaces/msg/Time'](
-            sec=int(stamp), nanosec=int((stamp % 1) * 1e9)), frame_id=''),
-        name=list(names), position=np.asarray(q, dtype=float), velocity=np.zeros(0),
-        effort=np.zeros(0))
-    return STORE.serialize_cdr(msg, 'sensor_msgs/msg/JointState')
-
-
-def traj_bytes(timed, names):
-    t = STORE.types
-    points = []
-    for q, s in zip(timed.points[1:], timed.times[1:]):
-        points.append(t['trajectory_msgs/msg/JointTrajectoryPoint'](
-            positions=np.asarray(q, dtype=float), velocities=np.zeros(0),
-            accelerations=np.zeros(0), effort=np.zeros(0),
-            time_from_start=t['builtin_interfaces/msg/Duration'](
-                sec=int(s), nanosec=int((s % 1) * 1e9))))
-    msg = t['trajectory_msgs/msg/JointTrajectory'](
-        header=t['std_msgs/msg/Header'](stamp=t['builtin_interfaces/msg/Time'](
-            sec=0, nanosec=0), frame_id=''), joint_names=list(names), points=points)
-    return STORE.serialize_cdr(msg, 'trajectory_msgs/msg/JointTrajectory')
+    return rosbags_bytes(js_message(names, q, stamp), JS_TYPE)
 
 
 def simulated_run(names_order=None, extra=False):
-    """Joint states of the arm following the straight move into the box, until it stops."""
+    """
+    Joint states of the arm following the straight move into the box, until it stops.
+
+    Returns the messages as (stamp [ns], topic, plain fields), the stop configuration and
+    the time of the stop after the first message [s].
+    """
     arm = iiwa_arm()
     path = np.array([WORLD.start, WORLD.goal])
     timed = time_path(path, arm.velocity_limits, 0.5)
     stop = WORLD.compliant_arm().execute(path).config
     fraction = np.linalg.norm(stop - path[0]) / np.linalg.norm(path[1] - path[0])
     t_stop = fraction * timed.duration
-    messages = [(0.0, 'js', WORLD.start), (0.05, 'traj', timed)]
+    events = [(0.0, 'js', WORLD.start), (0.05, 'traj', timed)]
     for k in range(1, int(3.0 * RATE)):
         t = 0.05 + k / RATE
-        q = timed.at(min(t - 0.05, t_stop))
-        messages.append((t, 'js', q))
+        events.append((t, 'js', timed.at(min(t - 0.05, t_stop))))
     order = names_order or list(range(7))
     names = [f'lbr_A{i + 1}' for i in order] + (['gripper_finger'] if extra else [])
     out = []
-    for t, kind, value in messages:
+    for t, kind, value in events:
+        stamp = int((1.0 + t) * 1e9)
         if kind == 'js':
             q = [value[i] for i in order] + ([0.01] if extra else [])
-            out.append((int((1.0 + t) * 1e9), JS, js_bytes(names, q, 1.0 + t)))
+            out.append((stamp, JS, js_message(names, q, 1.0 + t)))
         else:
-            joints = [f'lbr_A{i}' for i in range(1, 8)]
-            out.append((int((1.0 + t) * 1e9), TRAJ, traj_bytes(value, joints)))
+            out.append((stamp, TRAJ, traj_message(value, [f'lbr_A{i}' for i in range(1, 8)])))
     return out, stop, 0.05 + t_stop
 
 
-def write_bag(path, messages, version, plugin):
-    types = {JS: 'sensor_msgs/msg/JointState', TRAJ: 'trajectory_msgs/msg/JointTrajectory'}
+def write_bag(path, messages, version, plugin, types=None, store=STORE):
+    """Write (stamp, topic, fields or bytes) messages with rosbags."""
+    types = types or {JS: JS_TYPE, TRAJ: TRAJ_TYPE}
     with Writer(path, version=version, storage_plugin=plugin) as writer:
-        conns = {topic: writer.add_connection(topic, types[topic], typestore=STORE)
+        conns = {topic: writer.add_connection(topic, types[topic], typestore=store)
                  for topic in {m[1] for m in messages}}
-        for stamp, topic, data in messages:
+        for stamp, topic, fields in messages:
+            data = rosbags_bytes(fields, types[topic]) if isinstance(fields, dict) else fields
             writer.write(conns[topic], stamp, data)
 
 
@@ -203,10 +233,149 @@ def test_nan_joint_states_are_reported_and_skipped(tmp_path):
     assert any('non-finite' in p for p in result.problems)
 
 
-def test_a_truncated_bag_is_a_clear_error(tmp_path):
-    messages, _, _ = simulated_run()
+TIME_DEF = 'int32 sec\nuint32 nanosec\n'
+HEADER_DEF = 'builtin_interfaces/Time stamp\nstring frame_id\n'
+SEP = '=' * 80 + '\n'
+MCAP_DEFS = {
+    JS_TYPE: ('std_msgs/Header header\nstring[] name\nfloat64[] position\nfloat64[] velocity\n'
+              f'float64[] effort\n{SEP}MSG: std_msgs/Header\n{HEADER_DEF}{SEP}'
+              f'MSG: builtin_interfaces/Time\n{TIME_DEF}'),
+    TRAJ_TYPE: ('std_msgs/Header header\nstring[] joint_names\nJointTrajectoryPoint[] points\n'
+                f'{SEP}MSG: std_msgs/Header\n{HEADER_DEF}{SEP}MSG: builtin_interfaces/Time\n'
+                f'{TIME_DEF}{SEP}MSG: trajectory_msgs/JointTrajectoryPoint\n'
+                'float64[] positions\nfloat64[] velocities\nfloat64[] accelerations\n'
+                'float64[] effort\nbuiltin_interfaces/Duration time_from_start\n'
+                f'{SEP}MSG: builtin_interfaces/Duration\n{TIME_DEF}'),
+}
+
+
+def write_mcap_library_bag(path, messages, chunk_size=1 << 20):
+    """Write a bare .mcap file with the mcap / mcap-ros2-support libraries (zstd chunks)."""
+    from mcap_ros2.writer import Writer as Ros2Writer
+
+    types = {JS: JS_TYPE, TRAJ: TRAJ_TYPE}
+    with open(path, 'wb') as stream:
+        writer = Ros2Writer(stream, chunk_size=chunk_size)
+        schemas = {t: writer.register_msgdef(t, MCAP_DEFS[t]) for t in MCAP_DEFS}
+        for stamp, topic, fields in messages:
+            writer.write_message(topic, schemas[types[topic]], fields, log_time=stamp,
+                                 publish_time=stamp)
+        writer.finish()
+
+
+def test_a_bag_from_the_mcap_libraries_with_shuffled_and_extra_joints(tmp_path):
+    messages, stop, t_stop = simulated_run(names_order=[6, 2, 0, 4, 1, 3, 5], extra=True)
+    write_mcap_library_bag(tmp_path / 'arm.mcap', messages)
+    result = replay(tmp_path / 'arm.mcap')
+    assert result.paths == 1 and len(result.blocks) == 1 and not result.success
+    np.testing.assert_allclose(result.blocks[0].config, stop, atol=1e-9)
+    assert t_stop + 0.3 - 0.02 <= result.blocks[0].t <= t_stop + 0.3 + 0.02
+
+
+def test_a_bag_cut_in_its_summary_is_read_whole_and_noted(tmp_path):
+    messages, stop, _ = simulated_run()
     write_bag(tmp_path / 'bag', messages, 9, StoragePlugin.MCAP)
-    data = (tmp_path / 'bag' / 'bag.mcap').read_bytes()
-    (tmp_path / 'bag' / 'bag.mcap').write_bytes(data[: len(data) // 2])
-    with pytest.raises(ReplayError, match='not a readable rosbag2 bag'):
-        replay(tmp_path / 'bag')
+    mcap = tmp_path / 'bag' / 'bag.mcap'
+    mcap.write_bytes(mcap.read_bytes()[:-100])          # footer and part of the summary lost
+    result = replay(tmp_path / 'bag')
+    assert any('read record by record' in p for p in result.problems)
+    assert len(result.times) == sum(1 for m in messages if m[1] == JS)
+    assert len(result.blocks) == 1
+    np.testing.assert_allclose(result.blocks[0].config, stop, atol=1e-9)
+
+
+def test_a_bag_cut_midway_reports_what_came_before_the_damage(tmp_path):
+    messages, _, _ = simulated_run()
+    write_mcap_library_bag(tmp_path / 'arm.mcap', messages, chunk_size=4096)
+    data = (tmp_path / 'arm.mcap').read_bytes()
+    (tmp_path / 'arm.mcap').write_bytes(data[: len(data) * 6 // 10])
+    result = run_replay(tmp_path / 'arm.mcap', '--json')
+    assert result.returncode == 1
+    error = result.stderr.strip().splitlines()
+    assert len(error) == 1 and 'arm.mcap is damaged at byte' in error[0], result.stderr
+    assert json.loads(result.stdout)['paths'] == 1        # the command came before the cut
+    with pytest.raises(ReplayError) as err:
+        replay(tmp_path / 'arm.mcap')
+    total = sum(1 for m in messages if m[1] == JS)
+    assert 0 < len(err.value.partial.times) < total
+
+
+def test_a_truncated_sqlite_bag_is_a_one_line_error(tmp_path):
+    messages, _, _ = simulated_run()
+    write_bag(tmp_path / 'bag', messages, 9, StoragePlugin.SQLITE3)
+    db3 = tmp_path / 'bag' / 'bag.db3'
+    db3.write_bytes(db3.read_bytes()[:3000])
+    result = run_replay(tmp_path / 'bag')
+    assert result.returncode != 0 and result.stdout == ''
+    assert len(result.stderr.strip().splitlines()) == 1 and 'bag' in result.stderr
+
+
+def test_unknown_types_are_ignored_unless_needed(tmp_path):
+    store = get_typestore(Stores.ROS2_JAZZY)
+    store.register(get_types_from_msg('float64 torque\nstring label\n', 'lab_msgs/msg/Gizmo'))
+    gizmo = store.serialize_cdr(store.types['lab_msgs/msg/Gizmo'](torque=1.5, label='x'),
+                                'lab_msgs/msg/Gizmo')
+    messages, _, _ = simulated_run()
+    types = {JS: JS_TYPE, TRAJ: TRAJ_TYPE, '/lab/gizmo': 'lab_msgs/msg/Gizmo'}
+    write_bag(tmp_path / 'extra', [*messages, (messages[5][0] + 1, '/lab/gizmo', gizmo)], 9,
+              StoragePlugin.MCAP, types, store)
+    assert len(replay(tmp_path / 'extra').blocks) == 1
+    result = run_replay(tmp_path / 'extra', '--joint-states', '/lab/gizmo')
+    assert result.returncode != 0
+    assert 'probdis: error:' in result.stderr and \
+        '/lab/gizmo carries lab_msgs/msg/Gizmo, not sensor_msgs/msg/JointState' in result.stderr
+
+
+def run_replay(bag, *args):
+    return subprocess.run([*probdis_command(), 'replay', str(bag), *args], capture_output=True,
+                          text=True, timeout=120)
+
+
+@pytest.mark.ros
+def test_publish_mode_delivers_every_message_in_order_with_its_timing(tmp_path):
+    store = get_typestore(Stores.ROS2_JAZZY)
+    store.register(get_types_from_msg('float64 torque\n', 'lab_msgs/msg/Gizmo'))
+    status = '/probdis_planner/status'
+    types = {JS: JS_TYPE, TRAJ: TRAJ_TYPE, status: 'std_msgs/msg/String',
+             '/lab/gizmo': 'lab_msgs/msg/Gizmo'}
+    messages, _, _ = simulated_run()
+    extra = [(messages[0][0] + 1, status, store.serialize_cdr(
+                 store.types['std_msgs/msg/String'](data=f'{{"n": {k}}}'), types[status]))
+             for k in range(3)]
+    extra.append((messages[9][0] + 1, '/lab/gizmo', store.serialize_cdr(
+        store.types['lab_msgs/msg/Gizmo'](torque=2.0), 'lab_msgs/msg/Gizmo')))
+    write_bag(tmp_path / 'bag', messages + extra, 9, StoragePlugin.MCAP, types, store)
+    recorded = {}
+    for _, topic, fields in sorted(messages + extra, key=lambda m: m[0]):
+        data = rosbags_bytes(fields, types[topic]) if isinstance(fields, dict) else fields
+        recorded.setdefault(topic, []).append(bytes(data))
+
+    ros = RosTest()
+    received = {}
+    try:
+        listener = ros.add(rclpy.create_node('bag_listener', context=ros.context))
+        for topic, cls in ((JS, JointState), (TRAJ, JointTrajectory), (status, String)):
+            qos = QoSProfile(depth=1000, durability=DurabilityPolicy.TRANSIENT_LOCAL
+                             if topic == status else DurabilityPolicy.VOLATILE)
+            listener.create_subscription(
+                cls, topic, lambda raw, topic=topic: received.setdefault(topic, []).append(
+                    (time.monotonic(), bytes(raw))), qos, raw=True)
+        env = dict(os.environ, ROS_DOMAIN_ID=str(ros.domain))
+        rate = 4.0
+        result = subprocess.run([*probdis_command(), 'replay', str(tmp_path / 'bag'),
+                                 '--publish', '--rate', str(rate), '--wait', '20', '--json'],
+                                env=env, capture_output=True, text=True, timeout=120)
+        assert result.returncode == 0, result.stderr
+        wait_for(lambda: sum(map(len, received.values())) >= 304, 10, 'every message')
+    finally:
+        ros.close()
+    doc = json.loads(result.stdout)
+    assert doc['published'] == len(messages) + 3 and list(doc['skipped']) == ['/lab/gizmo']
+    assert 'lab_msgs/msg/Gizmo is not installed' in result.stderr
+    for topic in (JS, TRAJ, status):     # DDS pads the payload to 4 bytes
+        assert [raw for _, raw in received[topic]] == [
+            raw + bytes(-len(raw) % 4) for raw in recorded[topic]], topic
+    arrivals = [t for t, _ in received[JS]]
+    span = (messages[-1][0] - messages[0][0]) * 1e-9 / rate
+    assert 0.8 * span < arrivals[-1] - arrivals[0] < 2.0 * span
+    assert received[TRAJ][0][0] - arrivals[0] == pytest.approx(0.05 / rate, abs=0.05)

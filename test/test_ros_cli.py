@@ -68,7 +68,8 @@ def test_service_commands_against_a_running_planner(env, tmp_path):
     assert timeout.returncode == 3 and 'is the planner running' in timeout.stderr
 
 
-def test_demo_disentangles_through_two_processes(env):
+def test_demo_disentangles_through_two_processes_and_its_bag_replays_the_same(env, tmp_path):
+    env['ROS_HOME'] = str(tmp_path)              # where the planner records its bags
     result = run(env, 'demo', '--json', timeout=400)
     assert result.returncode == 0, result.stderr[-2000:]
     doc = json.loads(result.stdout.strip().splitlines()[-1])
@@ -77,3 +78,11 @@ def test_demo_disentangles_through_two_processes(env):
     assert doc['paths'] >= 2 and doc['failures'] == doc['paths'] - 1
     assert set(doc['replan_latency_s']) == {'median', 'max'}
     assert 0 <= doc['replan_latency_s']['median'] <= doc['replan_latency_s']['max']
+    bags = list((tmp_path / 'probdis' / 'bags').iterdir())
+    assert len(bags) == 1
+    replayed = run(env, 'replay', str(bags[0]), '--json')
+    assert replayed.returncode == 0, replayed.stderr
+    summary = json.loads(replayed.stdout)
+    assert (summary['success'], summary['paths'], summary['failures']) == \
+        (doc['success'], doc['paths'], doc['failures'])
+    assert len(summary['blocks']) == doc['failures']

@@ -254,7 +254,9 @@ def test_the_planner_keeps_up_with_joint_states_at_1khz(ros, tmp_path):
         wait_for(lambda: ros.status.get('failures', 0) >= 1 or finished(ros), 60,
                  'the first block')
         assert ros.status['state'] not in ('stopped', 'gave_up'), ros.status
-        # the block was detected where the flange touches a hidden disc
+        # the block was detected where the flange touches a hidden disc (the map reaches
+        # the disk from the planner's I/O thread, just after the status)
+        wait_for(lambda: (tmp_path / 'map.json').exists(), 5, 'the map file')
         x = FailureMap.load(tmp_path / 'map.json').points[0]
         gaps = [abs((x - o.center) @ o.normal) + max(0.0, np.linalg.norm(x - o.center) - o.radius)
                 for o in WORLD.obstacles]
@@ -293,6 +295,7 @@ def test_a_killed_planner_gets_its_map_back(ros, tmp_path):
     try:
         wait_for(lambda: ros.call('start', timeout=60).success, 60, 'start')
         wait_for(lambda: ros.status.get('failures', 0) >= 1, 60, 'a failure')
+        wait_for(map_file.exists, 5, 'the map file')      # written by the I/O thread
     finally:
         first.send_signal(signal.SIGKILL)
         first.wait()

@@ -19,7 +19,8 @@ Any rosbag2 bag (MCAP or sqlite3, metadata v8 or v9, written by probdis or by
 ``ros2 bag record`` on the real arm) with joint states and commanded trajectories: the same
 detector as the live planner (:class:`probdis_ros.ros.monitor.BlockDetector`) judges every
 command against the joint states that followed it, and every block becomes a failure, so the
-failure map is rebuilt exactly as the planner built it.  No rclpy: bag I/O is rosbags'.
+failure map is rebuilt exactly as the planner built it.  No rclpy: bags are read by
+:mod:`probdis_ros.ros.bag_source` (rosbags, and record by record for a damaged MCAP file).
 
 Commands are classified like the planner sends them: a one-point command at the measured
 position is a hold, the first motion after a block is the retreat, every other motion is a
@@ -35,14 +36,16 @@ from pathlib import Path
 import numpy as np
 from probdis_ros.model import FailureMap, iiwa_arm
 from probdis_ros.planning.disentangle import failure_from_block
+from probdis_ros.ros.bag_source import Bag, BagError
 from probdis_ros.ros.messages import BadJointStateError, joint_positions, timed_path_from_msg
 from probdis_ros.ros.monitor import BlockDetector, DetectorSettings, Verdict
 from probdis_ros.ros.trajectory import nearest_segment
-from rosbags.highlevel import AnyReader
 
 JOINT_STATES = '/lbr/joint_states'
 TRAJECTORY = '/lbr/joint_trajectory_controller/joint_trajectory'
 JOINTS = [f'lbr_A{i}' for i in range(1, 8)]
+JOINT_STATE_TYPE = 'sensor_msgs/msg/JointState'
+TRAJECTORY_TYPE = 'trajectory_msgs/msg/JointTrajectory'
 
 
 class ReplayError(Exception):
@@ -93,54 +96,63 @@ def replay(bag: str | Path, joint_states_topic: str = JOINT_STATES,
     arm = iiwa_arm(with_orientation=orientation)
     settings = settings or DetectorSettings()
     result = ReplayResult(fmap=FailureMap(arm.task_space))
-    path = Path(bag)
-    if not path.exists():
-        raise ReplayError(f'{path}: no such bag')
     try:
-        reader = AnyReader([path])
-        reader.open()
-    except Exception as err:   # rosbags raises several types for a non-bag
-        raise ReplayError(f'{path}: not a readable rosbag2 bag ({err})') from None
-    try:
-        topics = {c.topic: c for c in reader.connections}
-        for topic in (joint_states_topic, trajectory_topic):
-            if topic not in topics:
-                raise ReplayError(f'{path}: no {topic} topic (the bag has '
-                                  f'{", ".join(sorted(topics)) or "no topics"})')
-        status = [c for c in reader.connections if c.topic.endswith('/probdis_planner/status')]
-        wanted = [topics[joint_states_topic], topics[trajectory_topic], *status]
+        source = Bag(bag)
+    except BagError as err:
+        raise ReplayError(str(err)) from None
+    with source:
+        for topic, msgtype in ((joint_states_topic, JOINT_STATE_TYPE),
+                               (trajectory_topic, TRAJECTORY_TYPE)):
+            if topic not in source.topics and source.damage:
+                raise ReplayError(f'{bag}: {source.damage}', _finish(result))
+            if topic not in source.topics:
+                raise ReplayError(f'{bag}: no {topic} topic (the bag has '
+                                  f'{", ".join(sorted(source.topics)) or "no topics"})')
+            if source.topics[topic] != msgtype:
+                raise ReplayError(f'{bag}: {topic} carries {source.topics[topic]}, '
+                                  f'not {msgtype}')
+        if source.notice:
+            result.problems.append(source.notice)
+        status = {t for t, m in source.topics.items()
+                  if t.endswith('/probdis_planner/status') and m == 'std_msgs/msg/String'}
         try:
-            _run(reader, wanted, topics[trajectory_topic], status, names, arm, settings, result,
-                 reader.start_time * 1e-9)
-        except ReplayError:
-            raise
+            _run(source, [joint_states_topic, trajectory_topic, *status], trajectory_topic,
+                 status, names, arm, settings, result, source.start_ns * 1e-9)
+        except BagError as err:
+            raise ReplayError(f'{bag}: {err}', _finish(result)) from None
         except Exception as err:
-            raise ReplayError(f'{path}: damaged bag after {len(result.times)} joint states '
-                              f'({err})', result) from None
-    finally:
-        reader.close()
+            raise ReplayError(f'{bag}: damaged bag after {len(result.times)} joint states '
+                              f'({err})', _finish(result)) from None
+        if source.damage:
+            raise ReplayError(f'{bag}: {source.damage}', _finish(result))
+    return _finish(result)
+
+
+def _finish(result: ReplayResult) -> ReplayResult:
+    """Count a recording without status messages (the real arm's) as one run."""
     if result.runs == 0 and result.paths:
         result.runs = 1
     return result
 
 
-def _run(reader, connections, trajectory_conn, status_conns, names, arm, settings,
-         result: ReplayResult, t0: float) -> None:
+def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: set[str],
+         names: list[str], arm, settings: DetectorSettings, result: ReplayResult,
+         t0: float) -> None:
     measured = None
     detector = None
     kind = ''
     after_block = False
     last_path_done = False
     path = None
-    for conn, stamp, raw in reader.messages(connections=connections):
-        t = stamp * 1e-9 - t0
-        msg = reader.deserialize(raw, conn.msgtype)
-        if conn in status_conns:
+    for message in source.messages(topics):
+        t = message.stamp_ns * 1e-9 - t0
+        msg = source.deserialize(message)
+        if message.topic in status_topics:
             state = json.loads(msg.data)
             if state.get('state') == 'planning' and state.get('paths') == 0:
                 result.runs += 1
             continue
-        if conn is trajectory_conn:
+        if message.topic == trajectory_topic:
             if measured is None:
                 result.problems.append(f'{t:.3f} s: command before any joint state, skipped')
                 continue
