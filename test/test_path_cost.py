@@ -100,3 +100,17 @@ def test_path_through_a_failure_point_has_near_zero_success(iiwa):
     away[:, 0] += 2.0
     assert path_success_probability(iiwa, fmap, away, DELTA) > \
         path_success_probability(iiwa, fmap, path, DELTA)
+
+
+def test_the_compiled_arccos_is_within_one_ulp_of_libm():
+    """The edge kernels' inlined arccos must not change any probability beyond rounding."""
+    import numba
+    from probdis_ros.model.kernels import _arccos
+
+    many = numba.njit(lambda x: np.array([_arccos(v) for v in x]))
+    x = np.concatenate([np.linspace(-1.0, 1.0, 400_001), [-1.0, -0.5, -0.0, 0.0, 0.5, 1.0],
+                        np.random.default_rng(0).uniform(-1.0, 1.0, 200_000)])
+    exact = np.arccos(x)
+    ulps = np.abs(many(x) - exact) / np.spacing(np.maximum(exact, np.finfo(float).tiny))
+    assert ulps.max() <= 1.0
+    assert many(np.array([1.0]))[0] == 0.0 and many(np.array([-1.0]))[0] == np.pi

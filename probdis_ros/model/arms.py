@@ -90,6 +90,10 @@ class Arm(ABC):
     def fk(self, configs: np.ndarray) -> TaskPoints:
         """Map configurations ``(N, n_joints)`` (or one ``(n_joints,)``) to task space."""
 
+    def positions(self, configs: np.ndarray) -> np.ndarray:
+        """Return only the end-effector positions ``(N, d)`` (planning needs no more)."""
+        return self.fk(configs).positions
+
     def as_batch(self, configs: np.ndarray) -> np.ndarray:
         """Return configs as a float ``(N, n_joints)`` array, or raise ValueError."""
         batch = np.atleast_2d(np.asarray(configs, dtype=float))
@@ -209,6 +213,7 @@ class SerialChainArm(Arm):
         self._tip_rotation = tip_rotation
         self.lower, self.upper, self.velocity_limits = lower, upper, velocity_limits
         self.task_space = TaskSpace.POSE3 if with_orientation else TaskSpace.POINT3
+        self._kernel_params: tuple | None = None
 
     @classmethod
     def from_urdf(cls, urdf: str | Path, tip_frame: str,
@@ -245,10 +250,13 @@ class SerialChainArm(Arm):
         AXIS_CHAIN (with signed axis codes) where every joint frame is parallel to the base
         at zero and turns about a coordinate axis, as in the iiwa URDF; CHAIN otherwise.
         """
-        codes = self._axis_codes()
-        kind = CHAIN if codes is None else AXIS_CHAIN
-        return (kind, np.zeros(0) if codes is None else codes, self._offsets, self._bases,
-                self._tip_offset, self._tip_rotation)
+        if self._kernel_params is None:
+            codes = self._axis_codes()
+            kind = CHAIN if codes is None else AXIS_CHAIN
+            self._kernel_params = (kind, np.zeros(0) if codes is None else codes,
+                                   self._offsets, self._bases, self._tip_offset,
+                                   self._tip_rotation)
+        return self._kernel_params
 
     def _axis_codes(self) -> np.ndarray | None:
         codes = []
@@ -270,9 +278,12 @@ class SerialChainArm(Arm):
         batch = self.as_batch(configs)
         positions = np.empty((len(batch), 3))
         rotations = np.empty((len(batch), 3, 3))
-        chain_kernel(batch, self._offsets, self._bases, self._tip_offset, self._tip_rotation,
-                     positions, rotations)
+        chain_kernel(batch, *self.kernel_params(), positions, rotations)
         return positions, rotations
+
+    def positions(self, configs: np.ndarray) -> np.ndarray:
+        """Return the tip positions ``(N, 3)`` (no quaternions)."""
+        return self.tip_frames(configs)[0]
 
     def fk(self, configs: np.ndarray) -> TaskPoints:
         """Return tip positions, with quaternions when the task space has orientation."""

@@ -37,6 +37,13 @@ from probdis_ros.model.path_cost import (
 )
 
 
+def _padded(values: np.ndarray, dim: int) -> np.ndarray:
+    """Return ``(F, dim)`` values as a contiguous ``(F, 3)`` array (zeros beyond dim)."""
+    out = np.zeros((len(values), 3))
+    out[:, :dim] = np.asarray(values, dtype=float).reshape(-1, dim)
+    return out
+
+
 class EdgeCoster:
     """Cost of straight joint-space edges under a fixed failure map (compiled)."""
 
@@ -52,9 +59,8 @@ class EdgeCoster:
         self.length_weight = float(length_weight)
         self.hard_threshold = hard_threshold
         dim = arm.task_space.dim
-        self._failures = (
-            np.ascontiguousarray(fmap.points, dtype=float).reshape(-1, dim),
-            np.ascontiguousarray(fmap.directions, dtype=float).reshape(-1, dim),
+        self._failures = (          # points and directions padded to 3-D (z = 0 in 2-D)
+            _padded(fmap.points, dim), _padded(fmap.directions, dim),
             np.ascontiguousarray(quaternion_to_rotation(fmap.orientations)).reshape(-1, 3, 3),
             float(fmap.c_fail), bool(arm.task_space.has_orientation))
         self._arm = arm.kernel_params()

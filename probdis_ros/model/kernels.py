@@ -25,13 +25,15 @@ import numpy as np
 
 
 @numba.njit(cache=True)
-def chain_kernel(q: np.ndarray, offsets: np.ndarray, bases: np.ndarray, tip_offset: np.ndarray,
-                 tip_rotation: np.ndarray, pos_out: np.ndarray, rot_out: np.ndarray) -> None:
+def chain_kernel(q: np.ndarray, kind: int, codes: np.ndarray, offsets: np.ndarray,
+                 bases: np.ndarray, tip_offset: np.ndarray, tip_rotation: np.ndarray,
+                 pos_out: np.ndarray, rot_out: np.ndarray) -> None:
     """
-    Forward kinematics of a revolute chain for every row of q.
+    Forward kinematics of a revolute chain (CHAIN or AXIS_CHAIN, below) for every row of q.
 
     Joint j moves its child frame by ``offsets[j]`` in the parent frame and rotates it by
-    ``bases[j, 0] + cos(q_j) bases[j, 1] + sin(q_j) bases[j, 2]`` (each 3x3).
+    ``bases[j, 0] + cos(q_j) bases[j, 1] + sin(q_j) bases[j, 2]`` (each 3x3); an AXIS_CHAIN
+    turns about the coordinate axis ``codes[j]`` instead, with a quarter of the arithmetic.
     """
     cs = np.empty(q.shape[1])
     sn = np.empty(q.shape[1])
@@ -39,7 +41,11 @@ def chain_kernel(q: np.ndarray, offsets: np.ndarray, bases: np.ndarray, tip_offs
         for j in range(q.shape[1]):
             cs[j] = np.cos(q[k, j])
             sn[j] = np.sin(q[k, j])
-        _chain_pose(cs, sn, offsets, bases, tip_offset, tip_rotation, pos_out, rot_out, k)
+        if kind == AXIS_CHAIN:
+            _axis_chain_pose(cs, sn, codes, offsets, tip_offset, tip_rotation, pos_out,
+                             rot_out, k)
+        else:
+            _chain_pose(cs, sn, offsets, bases, tip_offset, tip_rotation, pos_out, rot_out, k)
 
 
 @numba.njit(cache=True)
@@ -82,7 +88,7 @@ def quaternion_kernel(rot: np.ndarray, quat_out: np.ndarray) -> None:
 # * AXIS_CHAIN: a revolute chain whose joint frames are parallel at zero and whose axes are
 #   coordinate axes (the iiwa URDF): joint_params are signed axis codes (+-1 x, +-2 y, +-3 z),
 #   so that a joint only mixes two columns of the rotation (about 4x less arithmetic).
-# Failure parameters: points (F, d), unit directions (F, d), rotation matrices (F, 3, 3) of
+# Failure parameters: points (F, 3), unit directions (F, 3) (z = 0 in 2-D), rotations (F, 3, 3) of
 # the failure orientations, c_fail, and use_orient.
 
 PLANAR = 0
@@ -212,99 +218,101 @@ def _tip_pose(px, py, pz, r00, r01, r02, r10, r11, r12, r20, r21, r22, tip_offse
         rot[i, 2, c] = r20 * t0 + r21 * t1 + r22 * t2
 
 
+# asin(z) = z + z^3 g(z^2) on [0, 1/2]: g fitted to its Taylor series (Chebyshev nodes,
+# degree 12); within 1 ulp of libm's asin there, so _arccos is within 2 ulp of libm's acos.
+_G0, _G1, _G2, _G3 = (0.16666666666666652, 0.07499999999999062, 0.044642857145245546,
+                      0.030381944220602152)
+_G4, _G5, _G6, _G7 = (0.02237216971363298, 0.017352468476557165, 0.013970082058240421,
+                      0.011490299128017144)
+_G8, _G9, _G10, _G11, _G12 = (0.010249877585098172, 0.005773215955924502,
+                              0.01653494841483269, -0.013488560155481588,
+                              0.027819480814899197)
+
+
 @numba.njit(cache=True, inline='always')
-def _arccos_upper(x):
+def _arccos(x):
     """
-    Return a tight upper bound of arccos(x) on [-1, 1] that needs only a square root.
+    Return arccos(x) for x in [-1, 1], inlined and without branches (so loops vectorise).
 
-    arccos(x) = 2 arcsin(y) with y = sqrt((1 - x) / 2), and arcsin(y) <= y + (pi/2 - 1) y^3
-    on [0, 1] (its Taylor terms beyond y are all positive and y^(2k+1) <= y^3), with
-    equality at both ends.
+    |x| <= 1/2: pi/2 - asin(x); beyond: 2 asin(sqrt((1 - |x|) / 2)), reflected for x < 0.
     """
-    y = np.sqrt(max(0.0, (1.0 - x) * 0.5))
-    return 2.0 * (y + (0.5 * np.pi - 1.0) * y * y * y)
+    a = abs(x)
+    big = a > 0.5
+    z = np.sqrt((1.0 - a) * 0.5) if big else a
+    t = z * z
+    g = (_G0 + t * (_G1 + t * (_G2 + t * (_G3 + t * (_G4 + t * (_G5 + t * (_G6 + t * (
+        _G7 + t * (_G8 + t * (_G9 + t * (_G10 + t * (_G11 + t * _G12))))))))))))
+    r = z + z * t * g
+    small = 0.5 * np.pi - r if x >= 0.0 else 0.5 * np.pi + r
+    large = 2.0 * r if x >= 0.0 else np.pi - 2.0 * r
+    return large if big else small
 
 
-@numba.njit(cache=True)
-def _chunk_probabilities(pos, rot, count, dim, f_points, f_dirs, f_rots, c_fail, use_orient,
-                         winner, den, p_out):
+@numba.njit(cache=True, error_model='numpy')
+def _chunk_probabilities(pos, rot, count, f_points, f_dirs, f_rots, c_fail, use_orient,
+                         soa, p_out):
     """
     Write max over failures of P_COORD * (1 - 0.5 D_ORIENT) for each pose of the chunk.
 
-    ``1 + c d^2`` of every (point, failure) pair comes first, in a loop the compiler
-    vectorises (den is a scratch buffer).  Then, per point, the previous point's winning
-    failure goes first, and a failure is skipped as soon as an upper bound of its probability
-    cannot beat the best so far: ``1 / (1 + c d^2)``, a cheap bound of alpha, the value without
-    the orientation factor (at most 1).  The bounds are rigorous (inflated by 1e-9 against
-    rounding), so the maximum is exact.  Returns the winner of the last point.
+    Every (failure, point) pair is evaluated exactly, in an inner loop over the chunk's
+    points that the compiler vectorises: the poses are first copied to one contiguous row per
+    coordinate (soa, (12, CHUNK)), the arccos is _arccos, and the numpy error model drops the
+    division checks that would otherwise keep the loop scalar.  This is about twice as fast
+    as skipping failures by bounds one at a time, whose scalar square roots and divisions
+    cost more than the vector arithmetic they save.
     """
-    n_fail = f_points.shape[0]
-    for f in range(n_fail):
-        fx = f_points[f, 0]
-        fy = f_points[f, 1]
-        fz = f_points[f, 2] if dim == 3 else 0.0
-        for i in range(count):
-            dx = fx - pos[i, 0]
-            dy = fy - pos[i, 1]
-            dz = fz - pos[i, 2]
-            den[f, i] = 1.0 + c_fail * (dx * dx + dy * dy + dz * dz)
     for i in range(count):
-        px, py, pz = pos[i, 0], pos[i, 1], pos[i, 2]
-        best = 0.0
-        for m in range(-1, n_fail):
-            f = winner if m < 0 else m
-            if f < 0 or (m >= 0 and f == winner):
-                continue
-            denominator = den[f, i]
-            if best * denominator >= 1.0:     # 1 / (1 + c d^2) <= best, without dividing
-                continue
-            bound = 1.0 / denominator
-            dx = f_points[f, 0] - px
-            dy = f_points[f, 1] - py
-            dz = f_points[f, 2] - pz if dim == 3 else 0.0
+        p_out[i] = 0.0
+        for k in range(3):
+            soa[k, i] = pos[i, k]
+        for k in range(9):
+            soa[3 + k, i] = rot[i, k // 3, k % 3]
+    px, py, pz = soa[0], soa[1], soa[2]
+    r00, r01, r02, r10, r11, r12 = soa[3], soa[4], soa[5], soa[6], soa[7], soa[8]
+    r20, r21, r22 = soa[9], soa[10], soa[11]
+    for f in range(f_points.shape[0]):
+        fx, fy, fz = f_points[f, 0], f_points[f, 1], f_points[f, 2]
+        ux, uy, uz = f_dirs[f, 0], f_dirs[f, 1], f_dirs[f, 2]
+        g = f_rots[f]
+        g00, g01, g02, g10, g11, g12 = g[0, 0], g[0, 1], g[0, 2], g[1, 0], g[1, 1], g[1, 2]
+        g20, g21, g22 = g[2, 0], g[2, 1], g[2, 2]
+        for i in range(count):
+            dx = fx - px[i]
+            dy = fy - py[i]
+            dz = fz - pz[i]
             d2 = dx * dx + dy * dy + dz * dz
-            if d2 > 0.0:
-                dot = f_dirs[f, 0] * dx + f_dirs[f, 1] * dy
-                if dim == 3:
-                    dot += f_dirs[f, 2] * dz
-                cos_alpha = min(1.0, max(-1.0, dot / np.sqrt(d2)))
-                upper = _arccos_upper(cos_alpha) / np.pi * (1.0 + 1e-9)
-                if upper * upper * upper * bound <= best:
-                    continue
-                ratio = np.arccos(cos_alpha) / np.pi
-            else:
-                ratio = 1.0
-            p = ratio * ratio * ratio * bound
-            if p <= best:
-                continue
-            if use_orient:
-                trace = 0.0
-                for r in range(3):
-                    for c in range(3):
-                        trace += f_rots[f, r, c] * rot[i, r, c]
-                half_cos = np.sqrt(min(1.0, max(0.0, (trace + 1.0) * 0.25)))
-                # arccos(h) >= 2 sqrt((1 - h) / 2) bounds the factor before the arccos
-                lower = 2.0 * np.sqrt(max(0.0, (1.0 - half_cos) * 0.5)) * (1.0 - 1e-9)
-                if p * (1.0 - lower / np.pi) <= best:
-                    continue
-                p *= 1.0 - 0.5 * (2.0 / np.pi) * np.arccos(half_cos)
-            if p > best:
-                best = p
-                winner = f
-        p_out[i] = best
-    return winner
+            # at the failure itself alpha counts as pi (ratio 1): cos = -1
+            c = (ux * dx + uy * dy + uz * dz) / np.sqrt(d2) if d2 > 0.0 else -1.0
+            ratio = _arccos(min(1.0, max(-1.0, c))) / np.pi
+            p = ratio * ratio * ratio / (1.0 + c_fail * d2)
+            # orientation: 1 - 0.5 D_ORIENT from trace(G^T R) (use_orient is constant in the
+            # loop, which the compiler hoists)
+            trace = (g00 * r00[i] + g01 * r01[i] + g02 * r02[i] + g10 * r10[i] + g11 * r11[i]
+                     + g12 * r12[i] + g20 * r20[i] + g21 * r21[i] + g22 * r22[i])
+            half_cos = np.sqrt(min(1.0, max(0.0, (trace + 1.0) * 0.25)))
+            factor = 1.0 - _arccos(half_cos) / np.pi
+            p_out[i] = max(p_out[i], p * factor if use_orient else p)
+
+
+@numba.njit(cache=True, inline='always')
+def _chunk_log_survival(p_buf, count, p_max):
+    """Return sum log(1 - min(p, p_max)) over the chunk, with one logarithm."""
+    survival = 1.0
+    for i in range(count):
+        survival *= 1.0 - min(p_buf[i], p_max)
+    return np.log(survival)
 
 
 @numba.njit(cache=True)
 def edge_cost_kernel(a, b, delta, length_weight, hard_threshold, p_max, kind,
                      joint_params, offsets, bases, tip_offset, tip_rotation,
-                     f_points, f_dirs, f_rots, c_fail, use_orient, pos, rot, den, p_buf):
+                     f_points, f_dirs, f_rots, c_fail, use_orient, pos, rot, soa, p_buf):
     """
     Return the cost of edge a -> b.
 
     Probabilistic mode (hard_threshold < 0): ``-sum (s/delta) log(1 - p) + length_weight L``.
-    Hard mode: ``L`` if every p <= hard_threshold, else inf.  pos, rot, den and p_buf are
-    scratch buffers for CHUNK points.
+    Hard mode: ``L`` if every p <= hard_threshold, else inf.  pos, rot, soa and p_buf are
+    buffers for CHUNK points.
     """
     n_joints = a.shape[0]
     length = 0.0
@@ -319,7 +327,6 @@ def edge_cost_kernel(a, b, delta, length_weight, hard_threshold, p_max, kind,
     if f_points.shape[0] == 0:
         return cost
     weight = (length / n) / delta
-    dim = f_points.shape[1]
     cs = np.empty(n_joints)
     sn = np.empty(n_joints)
     cd = np.empty(n_joints)
@@ -335,20 +342,18 @@ def edge_cost_kernel(a, b, delta, length_weight, hard_threshold, p_max, kind,
         sn[j] = np.sin(angle)
         cd[j] = np.cos(step)
         sd[j] = np.sin(step)
-    winner = -1
     for k0 in range(0, n, CHUNK):
         count = min(CHUNK, n - k0)
         _chunk_poses(cs, sn, cd, sd, b, k0, count, n, kind, joint_params, offsets, bases,
                      tip_offset, tip_rotation, pos, rot)
-        winner = _chunk_probabilities(pos, rot, count, dim, f_points, f_dirs, f_rots, c_fail,
-                                      use_orient, winner, den, p_buf)
+        _chunk_probabilities(pos, rot, count, f_points, f_dirs, f_rots, c_fail, use_orient,
+                             soa, p_buf)
+        if not hard:
+            cost -= weight * _chunk_log_survival(p_buf, count, p_max)
+            continue
         for i in range(count):
-            p = p_buf[i]
-            if hard:
-                if p > hard_threshold:
-                    return np.inf
-            else:
-                cost -= weight * np.log1p(-min(p, p_max))
+            if p_buf[i] > hard_threshold:
+                return np.inf
     return cost
 
 
@@ -359,7 +364,7 @@ def edge_costs_kernel(sources, target, base, toward, delta, length_weight, hard_
     """Write ``base[i] + cost(sources[i] -> target)`` (``target -> sources[i]`` unless toward)."""
     pos = np.empty((CHUNK, 3))
     rot = np.empty((CHUNK, 3, 3))
-    den = np.empty((f_points.shape[0], CHUNK))
+    soa = np.empty((12, CHUNK))
     p_buf = np.empty(CHUNK)
     for i in range(sources.shape[0]):
         a = sources[i] if toward else target
@@ -367,7 +372,7 @@ def edge_costs_kernel(sources, target, base, toward, delta, length_weight, hard_
         out[i] = base[i] + edge_cost_kernel(a, b, delta, length_weight, hard_threshold, p_max,
                                             kind, joint_params, offsets, bases, tip_offset,
                                             tip_rotation, f_points, f_dirs, f_rots, c_fail,
-                                            use_orient, pos, rot, den, p_buf)
+                                            use_orient, pos, rot, soa, p_buf)
 
 
 @numba.njit(cache=True)
@@ -410,7 +415,6 @@ def cheapest_edge_kernel(sources, target, base, toward, delta, length_weight, ha
     steps = np.zeros(m, dtype=np.int64)
     k_done = np.zeros(m, dtype=np.int64)
     weight = np.zeros(m)
-    winner = np.full(m, -1, dtype=np.int64)
     cs = np.empty((m, n_joints))
     sn = np.empty((m, n_joints))
     cd = np.empty((m, n_joints))
@@ -444,9 +448,8 @@ def cheapest_edge_kernel(sources, target, base, toward, delta, length_weight, ha
             ends[i, j] = b[j]
     pos = np.empty((CHUNK, 3))
     rot = np.empty((CHUNK, 3, 3))
-    den = np.empty((f_points.shape[0], CHUNK))
+    soa = np.empty((12, CHUNK))
     p_buf = np.empty(CHUNK)
-    dim = f_points.shape[1] if f_points.shape[0] > 0 else 3
     while True:
         pick = -1
         for i in range(m):   # lowest bound first; on equal bounds a finished edge, then index
@@ -464,16 +467,14 @@ def cheapest_edge_kernel(sources, target, base, toward, delta, length_weight, ha
         count = min(CHUNK, steps[i] - k_done[i])
         _chunk_poses(cs[i], sn[i], cd[i], sd[i], ends[i], k_done[i], count, steps[i], kind,
                      joint_params, offsets, bases, tip_offset, tip_rotation, pos, rot)
-        winner[i] = _chunk_probabilities(pos, rot, count, dim, f_points, f_dirs, f_rots,
-                                         c_fail, use_orient, winner[i], den, p_buf)
+        _chunk_probabilities(pos, rot, count, f_points, f_dirs, f_rots, c_fail, use_orient,
+                             soa, p_buf)
         k_done[i] += count
+        if not hard:
+            bound[i] -= weight[i] * _chunk_log_survival(p_buf, count, p_max)
         for r in range(count):
-            p = p_buf[r]
-            if hard:
-                if p > hard_threshold:
-                    bound[i] = np.inf
-                    break
-            else:
-                bound[i] -= weight[i] * np.log1p(-min(p, p_max))
+            if hard and p_buf[r] > hard_threshold:
+                bound[i] = np.inf
+                break
         if k_done[i] == steps[i]:
             done[i] = True

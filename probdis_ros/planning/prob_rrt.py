@@ -106,7 +106,7 @@ class _Tree:
     reverse: bool
     parent: list[int] = field(default_factory=list)
     edge: list[float] = field(default_factory=list)
-    cost: list[float] = field(default_factory=list)
+    costs: np.ndarray = field(default_factory=lambda: np.zeros(0))
     size: int = 0
 
     @classmethod
@@ -114,9 +114,14 @@ class _Tree:
                reverse: bool) -> _Tree:
         nodes = np.empty((capacity, len(root)))
         positions = np.empty((capacity, len(root_position)))
-        tree = cls(nodes, positions, reverse)
+        tree = cls(nodes, positions, reverse, costs=np.empty(capacity))
         tree.append(root, root_position, -1, 0.0, 0.0)
         return tree
+
+    @property
+    def cost(self) -> np.ndarray:
+        """Cost-to-come (start tree) or cost-to-go (goal tree) of every node."""
+        return self.costs[:self.size]
 
     def append(self, node: np.ndarray, position: np.ndarray, parent: int, edge: float,
                cost: float) -> int:
@@ -124,7 +129,7 @@ class _Tree:
         self.positions[self.size] = position
         self.parent.append(parent)
         self.edge.append(edge)
-        self.cost.append(cost)
+        self.costs[self.size] = cost
         self.size += 1
         return self.size - 1
 
@@ -138,7 +143,7 @@ class _Tree:
         stack = [index]
         while stack:
             node = stack.pop()
-            self.cost[node] = self.cost[self.parent[node]] + self.edge[node]
+            self.costs[node] = self.costs[self.parent[node]] + self.edge[node]
             stack.extend(children.get(node, []))
 
     def chain(self, index: int) -> list[int]:
@@ -186,12 +191,13 @@ class ProbRRT:
         goal = self._checked(goal, 'goal')
         coster = self.coster_type(self.arm, fmap, s.delta, s.length_weight, s.hard_threshold)
         capacity = s.iterations + 1
-        ends = self.arm.fk(np.array([start, goal])).positions
+        ends = self.arm.positions(np.array([start, goal]))
         trees = (_Tree.rooted(start, ends[0], capacity, reverse=False),
                  _Tree.rooted(goal, ends[1], capacity, reverse=True))
         for tree, other in (trees, trees[::-1]):
-            for _ in range(s.iterations):
-                self._extend(tree, other.nodes[0], coster, rng)
+            targets = self._random_configurations(tree, other.nodes[0], rng)
+            for target in targets:
+                self._extend(tree, target, coster)
         plan = self._connect(trees[0], trees[1], coster)
         if plan is not None:
             plan.plan_time_s = time.perf_counter() - t0
@@ -204,14 +210,26 @@ class ProbRRT:
             raise ValueError(f'{name} configuration is outside the joint limits: {config}')
         return config
 
-    def _random_configuration(self, tree: _Tree, other_root: np.ndarray,
-                              rng: np.random.Generator) -> np.ndarray:
+    def _random_configurations(self, tree: _Tree, other_root: np.ndarray,
+                               rng: np.random.Generator):
+        """
+        Yield RandomConfiguration's target of each of the tree's K iterations.
+
+        All draws are made up front (goal-bias draws, then |C_RAND| samples per iteration)
+        and their positions computed in one FK batch; the farthest sample depends on the tree
+        as it has grown, so it is chosen when its iteration comes.
+        """
         s = self.settings
-        if rng.random() < s.p_goal:
-            return other_root
-        samples = self.arm.random_configurations(rng, s.n_random)
-        x = self.arm.fk(samples).positions
-        return samples[farthest_kernel(x, tree.positions[:tree.size])]
+        to_goal = rng.random(s.iterations) < s.p_goal
+        samples = self.arm.random_configurations(rng, s.iterations * s.n_random)
+        positions = self.arm.positions(samples)
+        for k in range(s.iterations):
+            if to_goal[k]:
+                yield other_root
+                continue
+            rows = slice(k * s.n_random, (k + 1) * s.n_random)
+            yield samples[rows][farthest_kernel(positions[rows],
+                                                tree.positions[:tree.size])]
 
     def _nearest(self, tree: _Tree, config: np.ndarray, k: int) -> np.ndarray:
         """Tree node indices sorted by joint-space distance to config (the k nearest if k)."""
@@ -219,10 +237,8 @@ class ProbRRT:
         order = np.argsort(d2, kind='stable')
         return order[:k] if k else order
 
-    def _extend(self, tree: _Tree, other_root: np.ndarray, coster: EdgeCoster,
-                rng: np.random.Generator) -> None:
+    def _extend(self, tree: _Tree, target: np.ndarray, coster: EdgeCoster) -> None:
         s = self.settings
-        target = self._random_configuration(tree, other_root, rng)
         candidates = self._nearest(tree, target, s.closest_candidates)
         best, _ = coster.cheapest(tree.nodes[candidates], target, toward=not tree.reverse)
         if best < 0:
@@ -240,15 +256,16 @@ class ProbRRT:
         s = self.settings
         d2 = ((tree.nodes[:tree.size] - new) ** 2).sum(axis=1)
         near = np.flatnonzero(d2 <= s.rewire_radius ** 2)
-        near = np.union1d(near, [closest]).astype(int)
-        costs_to = np.asarray(tree.cost)[near]
+        if not (near == closest).any():
+            near = np.sort(np.append(near, closest))
+        costs_to = tree.cost[near]
         best, total = coster.cheapest(tree.nodes[near], new, toward=not tree.reverse,
                                       base=costs_to)
         if best < 0:
             return
-        position = self.arm.fk(new).positions[0]
+        position = self.arm.positions(new)[0]
         index = tree.append(new, position, int(near[best]), total - costs_to[best], total)
-        others = np.delete(near, best)
+        others = np.concatenate((near[:best], near[best + 1:]))
         if len(others) == 0:
             return
         out = coster.costs(tree.nodes[others], new, toward=tree.reverse)
@@ -261,7 +278,7 @@ class ProbRRT:
         """Join each goal-tree leaf to its best start-tree node; keep the cheapest path."""
         s = self.settings
         best_total, best_pair = np.inf, None
-        start_costs = np.asarray(start_tree.cost)
+        start_costs = start_tree.cost
         for leaf in goal_tree.leaves():
             leaf_config = goal_tree.nodes[leaf]
             candidates = self._nearest(start_tree, leaf_config, s.connect_candidates)
@@ -274,4 +291,6 @@ class ProbRRT:
         head = start_tree.chain(best_pair[0])[::-1]
         tail = goal_tree.chain(best_pair[1])
         path = np.vstack([start_tree.nodes[head], goal_tree.nodes[tail]])
-        return Plan(path, best_total)
+        # a start-tree node that reached the goal tree's root exactly joins it twice
+        repeated = np.all(path[1:] == path[:-1], axis=1)
+        return Plan(path[np.concatenate(([True], ~repeated))], best_total)
