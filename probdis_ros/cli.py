@@ -23,6 +23,7 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable
 import json
+from pathlib import Path
 import sys
 
 SETTINGS = ('2d', '3d', '3d-orient')
@@ -98,6 +99,53 @@ def cmd_bench_fk(args: argparse.Namespace) -> int:
               f'(median of {result["repeats"]} x {result["configs"]}, one thread)')
         print(f'machine: {result["machine"]}')
     return 0
+
+
+def cmd_experiment_sweep(args: argparse.Namespace) -> int:
+    """Run (or resume) a sweep of simulated episodes."""
+    from probdis_ros.experiments.sweep import (
+        episode_keys,
+        Method,
+        progress_line,
+        run_sweep,
+        SETTINGS,
+    )
+
+    settings = _split(args.setting)
+    unknown = [s for s in settings if s not in SETTINGS]
+    if unknown:
+        raise UsageError(f'unknown setting {unknown[0]!r}; choose from {", ".join(SETTINGS)}')
+    try:
+        obstacles = [int(n) for n in _split(args.obstacles)]
+    except ValueError:
+        raise UsageError('--obstacles takes comma-separated integers, not '
+                         f'{args.obstacles!r}') from None
+    methods = [Method.parse(m) for m in _split(args.methods)]
+    if args.worlds < 1 or args.max_paths < 1 or any(n < 0 for n in obstacles) or \
+            (args.workers is not None and args.workers < 1):
+        raise UsageError('--worlds, --max-paths and --workers must be positive, obstacle '
+                         'counts not negative')
+    keys = episode_keys(settings, obstacles, args.worlds, methods, args.seed)
+    progress = progress_line if sys.stderr.isatty() else None
+    report = run_sweep(keys, Path(args.out), args.max_paths, args.scheduler, args.workers,
+                       progress)
+    print(f'{args.out}: {report.total} episodes, {report.skipped} already done, '
+          f'{report.ran} run in {report.seconds:.0f} s')
+    return 0
+
+
+def cmd_experiment_report(args: argparse.Namespace) -> int:
+    """Write the report of a sweep directory."""
+    from probdis_ros.experiments.report import markdown_table, write_report
+
+    summary = write_report(args.dir)
+    print(markdown_table(summary), end='')
+    print(f'wrote {args.dir}/success.png, sensitivity.png, summary.json, summary.md')
+    return 0
+
+
+def _split(text: str) -> list[str]:
+    return [part.strip() for part in text.split(',') if part.strip()]
 
 
 def cmd_map_plot(args: argparse.Namespace) -> int:
@@ -406,6 +454,29 @@ def build_parser() -> argparse.ArgumentParser:
                       help='C_FAIL of the example map [1/m^2]')
     plot.add_argument('--extent', type=float, nargs=4, metavar=('X0', 'X1', 'Y0', 'Y1'))
     plot.set_defaults(handler=cmd_map_plot)
+
+    experiment = sub.add_parser('experiment', help="the paper's evaluation: sweeps, report")
+    exp_sub = experiment.add_subparsers(dest='experiment_command', required=True,
+                                        metavar='ACTION')
+    sweep = exp_sub.add_parser('sweep', help='run simulated episodes on Dask, resumably')
+    sweep.add_argument('--setting', default='2d,3d,3d-orient',
+                       help='comma-separated settings (2d, 3d, 3d-orient)')
+    sweep.add_argument('--obstacles', default='1,10,30,50', help='comma-separated counts')
+    sweep.add_argument('--methods',
+                       default='probabilistic,hard:0.01,hard:0.02,epsilon:0.2,epsilon:0.4',
+                       help='comma-separated probabilistic[:C_FAIL], hard:Y, epsilon:X')
+    sweep.add_argument('--worlds', type=int, default=100, help='worlds per obstacle count')
+    sweep.add_argument('--max-paths', type=int, default=20, help='N_ITER of each episode')
+    sweep.add_argument('--seed', type=int, default=0, help='seed of the sweep (its worlds)')
+    sweep.add_argument('--out', required=True, help='directory of episodes.jsonl')
+    sweep.add_argument('--scheduler', help='address of a running Dask scheduler '
+                       '(default: a LocalCluster on this machine)')
+    sweep.add_argument('--workers', type=int, help='LocalCluster worker processes '
+                       '(default: one per core)')
+    sweep.set_defaults(handler=cmd_experiment_sweep)
+    report = exp_sub.add_parser('report', help='success curves, CIs, figures and tables')
+    report.add_argument('dir', help='the --out directory of a sweep')
+    report.set_defaults(handler=cmd_experiment_report)
     return parser
 
 

@@ -184,3 +184,89 @@ def plot_replay(result, out: str | Path, d_dist: float) -> Path:
     fig.savefig(out, dpi=110, bbox_inches='tight')
     plt.close(fig)
     return out
+
+
+def _grid(summary: dict):
+    """Return the settings, obstacle counts and methods of a sweep summary, sorted."""
+    cells = summary['cells']
+    order = {'2d': 0, '3d': 1, '3d-orient': 2}
+    settings = sorted({c['setting'] for c in cells}, key=lambda s: order.get(s, 9))
+    counts = sorted({c['obstacles'] for c in cells})
+    methods = sorted({c['method'] for c in cells},
+                     key=lambda m: (m.split(':')[0] != 'probabilistic', m))
+    return settings, counts, methods
+
+
+def plot_success_curves(summary: dict, out: str | Path) -> Path:
+    """Draw success rate against the number of planned paths, one panel per cell (Fig. 4)."""
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    settings, counts, methods = _grid(summary)
+    fig, axes = plt.subplots(len(settings), len(counts), squeeze=False, sharex=True,
+                             sharey=True, figsize=(3.2 * len(counts), 2.6 * len(settings)))
+    colors = {m: plt.cm.tab10(k) for k, m in enumerate(methods)}
+    for cell in summary['cells']:
+        ax = axes[settings.index(cell['setting']), counts.index(cell['obstacles'])]
+        n = np.arange(1, cell['max_paths'] + 1)
+        curve = cell['curve']
+        ax.step(n, curve['rate'], where='post', color=colors[cell['method']], lw=1.5,
+                label=cell['method'])
+        ax.fill_between(n, curve['low'], curve['high'], step='post',
+                        color=colors[cell['method']], alpha=0.15, lw=0)
+    for r, setting in enumerate(settings):
+        for k, count in enumerate(counts):
+            ax = axes[r, k]
+            ax.set_title(f'{setting}, {count} obstacles', fontsize=9)
+            ax.set_ylim(0, 1.02)
+            ax.grid(alpha=0.3)
+            if r == len(settings) - 1:
+                ax.set_xlabel('max. planned paths')
+            if k == 0:
+                ax.set_ylabel('success rate')
+    axes[0, 0].legend(fontsize=7, loc='lower right')
+    fig.suptitle('success within n paths (bands: 95 % bootstrap CI over worlds)', y=1.0)
+    fig.tight_layout()
+    return _save(fig, out)
+
+
+def plot_sensitivity(summary: dict, out: str | Path) -> Path:
+    """Draw success at the maximum number of paths per method, with CIs (Fig. 5)."""
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    settings, counts, methods = _grid(summary)
+    fig, axes = plt.subplots(1, len(settings), squeeze=False, sharey=True,
+                             figsize=(4.2 * len(settings), 3.2))
+    width = 0.8 / len(methods)
+    for s, setting in enumerate(settings):
+        ax = axes[0, s]
+        for m, method in enumerate(methods):
+            cells = {c['obstacles']: c for c in summary['cells']
+                     if c['setting'] == setting and c['method'] == method}
+            x = np.arange(len(counts)) + (m - (len(methods) - 1) / 2) * width
+            rate = np.array([cells[n]['success'] if n in cells else np.nan for n in counts])
+            low = np.array([cells[n]['ci95'][0] if n in cells else np.nan for n in counts])
+            high = np.array([cells[n]['ci95'][1] if n in cells else np.nan for n in counts])
+            ax.bar(x, rate, width, yerr=[rate - low, high - rate], capsize=2, label=method,
+                   color=plt.cm.tab10(m))
+        ax.set_xticks(np.arange(len(counts)), [str(n) for n in counts])
+        ax.set_xlabel('obstacles')
+        ax.set_title(setting)
+        ax.set_ylim(0, 1.05)
+        ax.grid(axis='y', alpha=0.3)
+    axes[0, 0].set_ylabel('success within the maximum paths')
+    axes[0, -1].legend(fontsize=7)
+    return _save(fig, out)
+
+
+def _save(fig, out: str | Path) -> Path:
+    import matplotlib.pyplot as plt
+
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=110, bbox_inches='tight')
+    plt.close(fig)
+    return out

@@ -1,0 +1,244 @@
+# Copyright 2026 probdis_ros contributors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+``probdis experiment sweep``: every (setting, obstacle count, world, method) episode on Dask.
+
+Each episode is independent and reproducible from its key: the world seed depends only on
+the sweep seed, the setting, the obstacle count and the world index, so every method meets
+the same worlds, and the loop's own seed is the world seed.  Finished episodes are appended
+to ``episodes.jsonl`` at once (one JSON object per line, flushed and synced); a rerun of the
+same command reads the file, drops a line cut short by a crash, and runs only what is
+missing, so an interrupted sweep loses at most the episodes that were running.
+
+The scheduler is a LocalCluster of single-threaded worker processes by default, or any
+running Dask scheduler (``--scheduler tcp://host:8786``): the work is plain functions of
+plain arguments, so a lab cluster runs it unchanged.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable
+from dataclasses import asdict, dataclass
+import json
+import os
+from pathlib import Path
+import sys
+import time
+import zlib
+
+SETTINGS = ('2d', '3d', '3d-orient')
+EPISODES_FILE = 'episodes.jsonl'
+
+
+@dataclass(frozen=True)
+class Method:
+    """A method and its parameter: probabilistic[:C_FAIL], hard:Y or epsilon:X."""
+
+    name: str
+    value: float | None = None
+
+    @classmethod
+    def parse(cls, text: str) -> Method:
+        """Parse ``name[:value]``; ValueError names what is wrong."""
+        name, _, value = text.strip().partition(':')
+        if name not in ('probabilistic', 'hard', 'epsilon'):
+            raise ValueError(f'unknown method {name!r} in {text!r} (probabilistic[:C_FAIL], '
+                             'hard:Y, epsilon:X)')
+        if not value:
+            if name != 'probabilistic':
+                raise ValueError(f'{name} needs its parameter, e.g. {name}:0.01')
+            return cls(name)
+        try:
+            number = float(value)
+        except ValueError:
+            raise ValueError(f'{text!r}: {value!r} is not a number') from None
+        bounds = {'probabilistic': (0.0, float('inf')), 'hard': (0.0, 1.0),
+                  'epsilon': (0.0, 1.0)}[name]
+        if not bounds[0] < number <= bounds[1]:
+            raise ValueError(f'{text!r}: {value} is outside ({bounds[0]}, {bounds[1]}]')
+        return cls(name, number)
+
+    def __str__(self) -> str:
+        return self.name if self.value is None else f'{self.name}:{self.value:g}'
+
+
+@dataclass(frozen=True)
+class EpisodeKey:
+    """One episode of a sweep; its world seed depends on everything but the method."""
+
+    setting: str
+    obstacles: int
+    world: int
+    method: str
+    sweep_seed: int
+
+    @property
+    def world_seed(self) -> int:
+        text = f'{self.sweep_seed}/{self.setting}/{self.obstacles}/{self.world}'
+        return zlib.crc32(text.encode())
+
+    @property
+    def id(self) -> str:
+        return f'{self.setting}/{self.obstacles}/{self.world}/{self.method}'
+
+
+def episode_keys(settings: Iterable[str], obstacles: Iterable[int], worlds: int,
+                 methods: Iterable[Method], seed: int) -> list[EpisodeKey]:
+    """Return every episode of a sweep, world by world (so partial sweeps compare methods)."""
+    return [EpisodeKey(s, n, w, str(m), seed) for s in settings for n in obstacles
+            for w in range(worlds) for m in methods]
+
+
+def run_episode_record(key: EpisodeKey, max_paths: int) -> dict:
+    """Run one episode (in a worker) and return its JSON record."""
+    from probdis_ros.model.failure_map import DEFAULT_C_FAIL
+    from probdis_ros.sim.episode import run_episode
+
+    method = Method.parse(key.method)
+    world = _world(key.setting, key.obstacles, key.world_seed)
+    kwargs = {}
+    if method.name == 'hard':
+        kwargs['threshold'] = method.value
+    elif method.name == 'epsilon':
+        kwargs['epsilon'] = method.value
+    c_fail = method.value if method.name == 'probabilistic' and method.value else DEFAULT_C_FAIL
+    t0 = time.perf_counter()
+    result = run_episode(world, method.name, seed=key.world_seed, max_paths=max_paths,
+                         c_fail=c_fail, **kwargs)
+    return {**asdict(key), 'id': key.id, 'world_seed': key.world_seed,
+            'success': result.success, 'paths': result.paths, 'failures': result.failures,
+            'max_paths': max_paths, 'plan_times_s': result.plan_times_s,
+            'wall_s': time.perf_counter() - t0, 'rejected_draws': world.rejected_draws}
+
+
+_WORLDS: dict = {}
+
+
+def _world(setting: str, obstacles: int, seed: int):
+    """Draw a world once per worker process (the methods of a world share it)."""
+    from probdis_ros.sim.worlds import random_world
+
+    key = (setting, obstacles, seed)
+    if key not in _WORLDS:
+        if len(_WORLDS) > 64:
+            _WORLDS.clear()
+        _WORLDS[key] = random_world(setting, obstacles, seed)
+    return _WORLDS[key]
+
+
+def read_episodes(path: Path, repair: bool = False) -> list[dict]:
+    """
+    Return the records of an episodes file (none if it does not exist).
+
+    Every record is written as one line in one call, so only the last line can be cut short
+    by a crash: it is ignored, and with ``repair`` cut off the file so that appending starts
+    on a clean line.  A damaged line elsewhere is an error.
+    """
+    if not path.exists():
+        return []
+    data = path.read_bytes()
+    end = data.rfind(b'\n') + 1
+    records = []
+    for number, line in enumerate(data[:end].splitlines(), start=1):
+        if line.strip():
+            try:
+                records.append(json.loads(line))
+            except json.JSONDecodeError:
+                raise ValueError(f'{path}: line {number} is not a JSON record') from None
+    tail = data[end:]
+    try:
+        records.append(json.loads(tail))
+        complete_tail = True
+    except json.JSONDecodeError:
+        complete_tail = False
+    if repair and tail:
+        with path.open('r+b') as stream:
+            if complete_tail:
+                stream.seek(0, os.SEEK_END)
+                stream.write(b'\n')
+            else:
+                stream.truncate(end)
+    return records
+
+
+@dataclass
+class SweepReport:
+    """What a sweep call did."""
+
+    total: int
+    skipped: int
+    ran: int
+    seconds: float
+
+
+def run_sweep(keys: list[EpisodeKey], out: Path, max_paths: int = 20,
+              scheduler: str | None = None, workers: int | None = None,
+              progress: Callable[[int, int, float], None] | None = None) -> SweepReport:
+    """Run the episodes of ``keys`` not yet in ``out/episodes.jsonl``; append each at once."""
+    from dask.distributed import as_completed, Client, LocalCluster
+
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / EPISODES_FILE
+    records = read_episodes(path, repair=True)
+    seeds = {keys[0].sweep_seed} if keys else set()
+    for record in records:
+        if {record.get('sweep_seed')} != seeds or record.get('max_paths') != max_paths:
+            raise ValueError(f'{path} holds episodes of another sweep (seed '
+                             f'{record.get("sweep_seed")}, --max-paths '
+                             f'{record.get("max_paths")}); use another --out')
+    done = {r['id'] for r in records}
+    todo = [k for k in keys if k.id not in done]
+    t0 = time.monotonic()
+    if not todo:
+        return SweepReport(len(keys), len(keys), 0, 0.0)
+    cluster = None
+    if scheduler:
+        client = Client(scheduler)
+    else:
+        cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1,
+                               processes=True, dashboard_address=None, host='127.0.0.1')
+        client = Client(cluster)
+    try:
+        futures = [client.submit(run_episode_record, key, max_paths, key=f'episode-{key.id}-'
+                                 f'{key.sweep_seed}-{max_paths}', pure=False) for key in todo]
+        with path.open('a') as stream:
+            for finished, future in enumerate(as_completed(futures), start=1):
+                stream.write(json.dumps(future.result()) + '\n')
+                stream.flush()
+                os.fsync(stream.fileno())
+                if progress:
+                    progress(finished, len(todo), time.monotonic() - t0)
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+    return SweepReport(len(keys), len(keys) - len(todo), len(todo), time.monotonic() - t0)
+
+
+def progress_line(done: int, total: int, elapsed: float) -> None:
+    """Print ``[#####.....] done/total, elapsed, time left`` on one refreshed stderr line."""
+    width = 30
+    filled = int(width * done / total)
+    left = elapsed / done * (total - done)
+    end = '\n' if done == total else ''
+    print(f'\r[{"#" * filled}{"." * (width - filled)}] {done}/{total} episodes, '
+          f'{_clock(elapsed)} elapsed, {_clock(left)} left ', end=end, file=sys.stderr,
+          flush=True)
+
+
+def _clock(seconds: float) -> str:
+    minutes, secs = divmod(int(seconds), 60)
+    hours, minutes = divmod(minutes, 60)
+    return f'{hours}:{minutes:02d}:{secs:02d}'

@@ -1,0 +1,132 @@
+# Copyright 2026 probdis_ros contributors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""Sweeps on a Dask LocalCluster (resumable after a kill) and the report's statistics."""
+
+import itertools
+import json
+import os
+from pathlib import Path
+import signal
+import subprocess
+import time
+
+from conftest import probdis_command
+import numpy as np
+from probdis_ros.experiments.report import bootstrap_ci, summarise, write_report
+from probdis_ros.experiments.sweep import (
+    episode_keys,
+    EPISODES_FILE,
+    Method,
+    read_episodes,
+    run_sweep,
+)
+import pytest
+
+SWEEP = ['--setting', '2d', '--obstacles', '1,10', '--worlds', '5',
+         '--methods', 'probabilistic,epsilon:0.2', '--seed', '3', '--workers', '2']
+
+
+def outcomes(path: Path) -> dict:
+    return {r['id']: (r['world_seed'], r['success'], r['paths'], r['failures'])
+            for r in read_episodes(path)}
+
+
+def test_a_killed_sweep_resumes_to_the_same_episodes_without_duplicates(tmp_path):
+    methods = [Method.parse('probabilistic'), Method.parse('epsilon:0.2')]
+    keys = episode_keys(['2d'], [1, 10], 5, methods, 3)
+    report = run_sweep(keys, tmp_path / 'whole', workers=2)
+    assert report.ran == 20 and report.skipped == 0
+    whole = outcomes(tmp_path / 'whole' / EPISODES_FILE)
+    assert len(whole) == 20
+    # methods meet the same worlds
+    seeds = {(k.obstacles, k.world): set() for k in keys}
+    for key in keys:
+        seeds[(key.obstacles, key.world)].add(whole[key.id][0])
+    assert all(len(s) == 1 for s in seeds.values())
+
+    out = tmp_path / 'killed'
+    episodes = out / EPISODES_FILE
+    sweep = subprocess.Popen([*probdis_command(), 'experiment', 'sweep', *SWEEP,
+                              '--out', str(out)], start_new_session=True)
+    deadline = time.monotonic() + 120
+    while not (episodes.exists() and len(read_episodes(episodes)) >= 5):
+        assert time.monotonic() < deadline and sweep.poll() is None, 'no episodes written'
+        time.sleep(0.05)
+    os.killpg(sweep.pid, signal.SIGKILL)
+    sweep.wait()
+    partial = len(read_episodes(episodes))
+    assert 5 <= partial < 20
+    with episodes.open('a') as stream:          # a record cut short by the kill
+        stream.write('{"setting": "2d", "obstac')
+    resumed = subprocess.run([*probdis_command(), 'experiment', 'sweep', *SWEEP,
+                              '--out', str(out)], capture_output=True, text=True, timeout=300)
+    assert resumed.returncode == 0, resumed.stderr
+    assert f'{partial} already done' in resumed.stdout
+    lines = episodes.read_text().splitlines()
+    assert len(lines) == 20 and all(json.loads(line) for line in lines)
+    assert outcomes(episodes) == whole
+    again = subprocess.run([*probdis_command(), 'experiment', 'sweep', *SWEEP,
+                            '--out', str(out)], capture_output=True, text=True, timeout=120)
+    assert again.returncode == 0 and '20 already done, 0 run' in again.stdout
+    assert episodes.read_text().splitlines() == lines
+
+    summary = write_report(out)
+    assert {(c['obstacles'], c['method']) for c in summary['cells']} == {
+        (1, 'probabilistic'), (1, 'epsilon:0.2'), (10, 'probabilistic'), (10, 'epsilon:0.2')}
+    for name in ('success.png', 'sensitivity.png', 'summary.json', 'summary.md'):
+        assert (out / name).stat().st_size > 0
+
+
+def test_a_sweep_of_another_seed_is_refused_in_the_same_directory(tmp_path):
+    keys = episode_keys(['2d'], [1], 1, [Method.parse('epsilon:0.2')], 0)
+    run_sweep(keys, tmp_path, workers=1)
+    other = episode_keys(['2d'], [1], 1, [Method.parse('epsilon:0.2')], 1)
+    with pytest.raises(ValueError, match='another sweep'):
+        run_sweep(other, tmp_path, workers=1)
+
+
+def test_the_bootstrap_interval_matches_the_exact_bootstrap_distribution():
+    """Five worlds, three successes: all 5^5 resamples enumerated by hand give the exact
+    2.5 % and 97.5 % quantiles of the resampled success rate."""
+    values = np.array([1.0, 0.0, 1.0, 1.0, 0.0])
+    means = sorted(sum(values[list(pick)]) / 5
+                   for pick in itertools.product(range(5), repeat=5))
+    exact = (means[int(0.025 * len(means))], means[int(0.975 * len(means)) - 1])
+    assert exact == (0.2, 1.0)
+    assert bootstrap_ci(values, samples=20000) == pytest.approx(exact)
+    assert bootstrap_ci(np.ones(7)) == (1.0, 1.0)
+    assert bootstrap_ci(values) == bootstrap_ci(values)          # seeded
+
+
+def test_success_within_n_paths_counts_only_successes_after_at_most_n_paths():
+    records = [{'setting': '2d', 'obstacles': 1, 'method': 'probabilistic', 'max_paths': 4,
+                'success': success, 'paths': paths, 'plan_times_s': [0.1] * paths,
+                'wall_s': 1.0}
+               for success, paths in [(True, 1), (True, 3), (False, 4), (True, 4)]]
+    cell = summarise(records)['cells'][0]
+    assert cell['curve']['rate'] == [0.25, 0.25, 0.5, 0.75]
+    assert cell['success'] == 0.75 and cell['mean_paths_successful'] == pytest.approx(8 / 3)
+
+
+def test_methods_parse_and_bad_ones_are_named():
+    assert str(Method.parse('hard:0.01')) == 'hard:0.01'
+    assert Method.parse('probabilistic') == Method('probabilistic')
+    for bad, message in (('hard', 'needs its parameter'), ('rrt', 'unknown method'),
+                         ('epsilon:x', 'not a number'), ('hard:2', 'outside')):
+        with pytest.raises(ValueError, match=message):
+            Method.parse(bad)
+    result = subprocess.run([*probdis_command(), 'experiment', 'sweep', '--methods', 'rrt',
+                             '--out', 'unused'], capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2 and "unknown method 'rrt'" in result.stderr
