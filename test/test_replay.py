@@ -208,7 +208,8 @@ def test_the_bag_is_readable_after_the_node_is_killed_mid_run(tmp_path, sig):
         node = subprocess.Popen([sys.executable, '-m', 'probdis_ros.ros.planner_node',
                                  '--ros-args', '-p', f'goal:={WORLD.goal.tolist()}',
                                  '-p', f'map_file:={tmp_path / "map.json"}',
-                                 '-p', f'bag_dir:={tmp_path / "bags"}'], env=env)
+                                 '-p', f'bag_dir:={tmp_path / "bags"}',
+                                 '-p', 'state_timeout:=2.0'], env=env)
         try:
             wait_for(lambda: ros.call('start', timeout=60).success, 60, 'start')
             wait_for(lambda: ros.status.get('failures', 0) >= 1, 60, 'a block')

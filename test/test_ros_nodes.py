@@ -198,10 +198,14 @@ def test_stop_during_motion_holds_within_one_control_period(ros, tmp_path):
     response = ros.call('stop')
     assert response.success
     wait_for(lambda: len(ros.trajectories[-1][1].points) == 1, 1, 'a hold command')
-    hold = np.array(ros.trajectories[-1][1].points[0].positions)
+    first_hold = np.array(ros.trajectories[-1][1].points[0].positions)
     time.sleep(0.1)     # the mock reaches the hold within a control period or two
+    hold = np.array(ros.trajectories[-1][1].points[0].positions)
     held = np.array(arm.q)
     np.testing.assert_allclose(held, hold, atol=1e-9)
+    # the hold is repeated at the next joint state: the arm went on for one period at most
+    period = 1.0 / 100.0
+    assert np.all(np.abs(hold - first_hold) <= 1.5 * period * iiwa_arm().velocity_limits)
     time.sleep(0.5)
     np.testing.assert_allclose(arm.q, held, atol=1e-9)
     assert ros.status['state'] == 'stopped'
