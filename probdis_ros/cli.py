@@ -170,8 +170,6 @@ def cmd_sim(args: argparse.Namespace) -> int:
     from probdis_ros.sim.episode import run_episode
     from probdis_ros.sim.worlds import load_world, random_world
 
-    if args.scenario and args.seed is not None:
-        raise UsageError('give either --scenario or --seed, not both')
     if args.scenario:
         world = load_world(scenario_path(args.scenario))
         if args.setting and args.setting != world.setting:
@@ -393,7 +391,8 @@ def build_parser() -> argparse.ArgumentParser:
                      help='Y of the hard method')
     sim.add_argument('--epsilon', type=float, default=DEFAULT_EPSILON,
                      help='X of the epsilon method')
-    sim.add_argument('--seed', type=int, help='random world and planner seed (default 0)')
+    sim.add_argument('--seed', type=int, help='seed of the random world and the planner; with '
+                     '--scenario of the planner only (default 0)')
     sim.add_argument('--scenario', help='a scenario YAML file, or the name of one in '
                      'config/scenarios/')
     sim.add_argument('--max-paths', type=_positive_int, default=20, help='N_ITER')

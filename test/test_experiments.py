@@ -53,7 +53,7 @@ def test_a_killed_sweep_resumes_to_the_same_episodes_without_duplicates(tmp_path
     # methods meet the same worlds
     seeds = {(k.obstacles, k.world): set() for k in keys}
     for key in keys:
-        seeds[(key.obstacles, key.world)].add(whole[key.id][0])
+        seeds[(key.obstacles, key.world)].add(whole[key.name][0])
     assert all(len(s) == 1 for s in seeds.values())
 
     out = tmp_path / 'killed'
@@ -98,8 +98,12 @@ def test_a_sweep_of_another_seed_is_refused_in_the_same_directory(tmp_path):
 
 
 def test_the_bootstrap_interval_matches_the_exact_bootstrap_distribution():
-    """Five worlds, three successes: all 5^5 resamples enumerated by hand give the exact
-    2.5 % and 97.5 % quantiles of the resampled success rate."""
+    """
+    Check the interval against the exact bootstrap distribution.
+
+    Five worlds, three successes: all 5^5 resamples, enumerated, give the exact 2.5 % and
+    97.5 % quantiles of the resampled success rate.
+    """
     values = np.array([1.0, 0.0, 1.0, 1.0, 0.0])
     means = sorted(sum(values[list(pick)]) / 5
                    for pick in itertools.product(range(5), repeat=5))

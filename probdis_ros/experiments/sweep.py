@@ -86,11 +86,13 @@ class EpisodeKey:
 
     @property
     def world_seed(self) -> int:
+        """Return the seed of the world (and of the loop): the same for every method."""
         text = f'{self.sweep_seed}/{self.setting}/{self.obstacles}/{self.world}'
         return zlib.crc32(text.encode())
 
     @property
-    def id(self) -> str:
+    def name(self) -> str:
+        """Identify the episode within its sweep: setting/obstacles/world/method."""
         return f'{self.setting}/{self.obstacles}/{self.world}/{self.method}'
 
 
@@ -117,7 +119,7 @@ def run_episode_record(key: EpisodeKey, max_paths: int) -> dict:
     t0 = time.perf_counter()
     result = run_episode(world, method.name, seed=key.world_seed, max_paths=max_paths,
                          c_fail=c_fail, **kwargs)
-    return {**asdict(key), 'id': key.id, 'world_seed': key.world_seed,
+    return {**asdict(key), 'id': key.name, 'world_seed': key.world_seed,
             'success': result.success, 'paths': result.paths, 'failures': result.failures,
             'max_paths': max_paths, 'plan_times_s': result.plan_times_s,
             'wall_s': time.perf_counter() - t0, 'rejected_draws': world.rejected_draws}
@@ -199,7 +201,7 @@ def run_sweep(keys: list[EpisodeKey], out: Path, max_paths: int = 20,
                              f'{record.get("sweep_seed")}, --max-paths '
                              f'{record.get("max_paths")}); use another --out')
     done = {r['id'] for r in records}
-    todo = [k for k in keys if k.id not in done]
+    todo = [k for k in keys if k.name not in done]
     t0 = time.monotonic()
     if not todo:
         return SweepReport(len(keys), len(keys), 0, 0.0)
@@ -211,7 +213,7 @@ def run_sweep(keys: list[EpisodeKey], out: Path, max_paths: int = 20,
                                processes=True, dashboard_address=None, host='127.0.0.1')
         client = Client(cluster)
     try:
-        futures = [client.submit(run_episode_record, key, max_paths, key=f'episode-{key.id}-'
+        futures = [client.submit(run_episode_record, key, max_paths, key=f'episode-{key.name}-'
                                  f'{key.sweep_seed}-{max_paths}', pure=False) for key in todo]
         with path.open('a') as stream:
             for finished, future in enumerate(as_completed(futures), start=1):
