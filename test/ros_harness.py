@@ -30,7 +30,7 @@ import time
 import numpy as np
 import rclpy
 from rclpy.context import Context
-from rclpy.executors import MultiThreadedExecutor
+from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import DurabilityPolicy, qos_profile_sensor_data, QoSProfile
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
@@ -58,7 +58,7 @@ class RosTest:
         self.domain = next(_DOMAINS) % 230
         self.context = Context()
         rclpy.init(context=self.context, domain_id=self.domain)
-        self.executor = MultiThreadedExecutor(num_threads=3, context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
         self.nodes = []
         self.probe = rclpy.create_node('probe', context=self.context)
         self.trajectories: list[tuple[float, JointTrajectory]] = []

@@ -49,7 +49,8 @@ def ros():
 
 def planner(ros, tmp_path, **params):
     """Start a planner node in-process (fast motions; nodes share one interpreter)."""
-    params = {'velocity_scaling': 1.0, 'state_timeout': 2.0, **params}
+    params = {'velocity_scaling': 1.0, 'state_timeout': 2.0, 'bag_dir': str(tmp_path / 'bags'),
+              **params}
     overrides = [Parameter('goal', value=GOAL.tolist()),
                  Parameter('map_file', value=str(tmp_path / 'map.json'))]
     overrides += [Parameter(k, value=v) for k, v in params.items()]
@@ -293,7 +294,7 @@ def test_a_killed_planner_gets_its_map_back(ros, tmp_path):
     map_file = tmp_path / 'map.json'
     command = [sys.executable, '-m', 'probdis_ros.ros.planner_node', '--ros-args',
                '-p', f'goal:={GOAL.tolist()}', '-p', f'map_file:={map_file}',
-               '-p', 'state_timeout:=2.0']
+               '-p', 'state_timeout:=2.0', '-p', f'bag_dir:={tmp_path / "bags"}']
     env = dict(os.environ, ROS_DOMAIN_ID=str(ros.domain))
     first = subprocess.Popen(command, env=env)
     try:
