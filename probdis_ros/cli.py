@@ -144,6 +144,33 @@ def cmd_experiment_report(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_experiment_robot(args: argparse.Namespace) -> int:
+    """Run the robot scenarios through the ROS nodes against the mock iiwa (Table I)."""
+    from probdis_ros.experiments.sweep import Method
+    from probdis_ros.resources import scenario_path
+    from probdis_ros.ros.robot_experiment import robot_table, run_robot_experiment
+
+    scenarios = _split(args.scenarios)
+    missing = [s for s in scenarios if not scenario_path(s).is_file()]
+    if missing:
+        raise UsageError(f'no scenario file {missing[0]!r} (a path, or a name in '
+                         'config/scenarios/)')
+    methods = [Method.parse(m) for m in _split(args.methods)]
+    if args.runs < 1 or not 0 < args.velocity_scaling <= 1:
+        raise UsageError('--runs must be positive and --velocity-scaling in (0, 1]')
+    say = None if args.json else (lambda line: print(line, file=sys.stderr, flush=True))
+    records = run_robot_experiment(Path(args.out), scenarios, methods, args.runs,
+                                   args.velocity_scaling, args.timeout, say)
+    wanted = {(s, str(m)) for s in scenarios for m in methods}
+    records = [r for r in records if (r['scenario'], r['method']) in wanted]
+    if args.json:
+        _print_json(records)
+    else:
+        print(robot_table(records, scenarios, [str(m) for m in methods]), end='')
+        print(f'runs and bags in {args.out}')
+    return 0
+
+
 def _split(text: str) -> list[str]:
     return [part.strip() for part in text.split(',') if part.strip()]
 
@@ -476,6 +503,21 @@ def build_parser() -> argparse.ArgumentParser:
     report = exp_sub.add_parser('report', help='success curves, CIs, figures and tables')
     report.add_argument('dir', help='the --out directory of a sweep')
     report.set_defaults(handler=cmd_experiment_report)
+    robot = exp_sub.add_parser('robot', help='the robot scenarios through the ROS nodes '
+                               "against the mock iiwa, like the paper's Table I")
+    robot.add_argument('--runs', type=int, default=10, help='runs per scenario and method '
+                       '(run r uses planner seed r)')
+    robot.add_argument('--scenarios', default='robot_waste,robot_maze,robot_bunny',
+                       help='comma-separated scenario files or names')
+    robot.add_argument('--methods', default='epsilon:0.2,hard:0.01,probabilistic',
+                       help='comma-separated probabilistic[:C_FAIL], hard:Y, epsilon:X')
+    robot.add_argument('--out', default='results/robot', help='directory of robot_runs.jsonl '
+                       'and the bags; runs already there are skipped')
+    robot.add_argument('--velocity-scaling', type=float, default=1.0,
+                       help='of the planner (the mock; 0.2 is the default on a real arm)')
+    robot.add_argument('--timeout', type=float, default=600.0, help='seconds per run')
+    robot.add_argument('--json', action='store_true', help='print every run as JSON')
+    robot.set_defaults(handler=cmd_experiment_robot)
     return parser
 
 

@@ -32,6 +32,7 @@ from probdis_ros.experiments.sweep import (
     read_episodes,
     run_sweep,
 )
+from probdis_ros.ros.robot_experiment import robot_table
 import pytest
 
 SWEEP = ['--setting', '2d', '--obstacles', '1,10', '--worlds', '5',
@@ -134,3 +135,14 @@ def test_methods_parse_and_bad_ones_are_named():
     result = subprocess.run([*probdis_command(), 'experiment', 'sweep', '--methods', 'rrt',
                              '--out', 'unused'], capture_output=True, text=True, timeout=60)
     assert result.returncode == 2 and "unknown method 'rrt'" in result.stderr
+
+
+def test_the_robot_table_counts_successes_and_averages_paths_of_successful_runs():
+    records = [{'scenario': 'a', 'method': 'm', 'success': True, 'paths': 3},
+               {'scenario': 'a', 'method': 'm', 'success': False, 'paths': 20},
+               {'scenario': 'b', 'method': 'm', 'success': True, 'paths': 6},
+               {'scenario': 'a', 'method': 'n', 'success': False, 'paths': 20}]
+    assert robot_table(records, ['a', 'b'], ['m', 'n']).splitlines() == [
+        '| scenario | m | n |', '| --- | --- | --- |',
+        '| a | 1 / 2 | 0 / 1 |', '| b | 1 / 1 | 0 / 0 |', '| **total** | 2 / 3 | 0 / 1 |',
+        '| mean paths (successful runs) | 4.5 | - |']

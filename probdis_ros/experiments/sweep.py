@@ -108,6 +108,7 @@ def run_episode_record(key: EpisodeKey, max_paths: int) -> dict:
     from probdis_ros.model.failure_map import DEFAULT_C_FAIL
     from probdis_ros.sim.episode import run_episode
 
+    cpu0 = time.process_time()
     method = Method.parse(key.method)
     world = _world(key.setting, key.obstacles, key.world_seed)
     kwargs = {}
@@ -122,7 +123,10 @@ def run_episode_record(key: EpisodeKey, max_paths: int) -> dict:
     return {**asdict(key), 'id': key.name, 'world_seed': key.world_seed,
             'success': result.success, 'paths': result.paths, 'failures': result.failures,
             'max_paths': max_paths, 'plan_times_s': result.plan_times_s,
-            'wall_s': time.perf_counter() - t0, 'rejected_draws': world.rejected_draws}
+            'wall_s': time.perf_counter() - t0, 'rejected_draws': world.rejected_draws,
+            # CPU time of the worker (world drawn here included): what the sweep costs
+            # regardless of what else the machine was doing
+            'cpu_s': time.process_time() - cpu0}
 
 
 _WORLDS: dict = {}
