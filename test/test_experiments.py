@@ -24,7 +24,7 @@ import time
 
 from conftest import probdis_command
 import numpy as np
-from probdis_ros.experiments.report import bootstrap_ci, summarise, write_report
+from probdis_ros.experiments.report import bootstrap_ci, claims, summarise, write_report
 from probdis_ros.experiments.sweep import (
     episode_keys,
     EPISODES_FILE,
@@ -146,3 +146,25 @@ def test_the_robot_table_counts_successes_and_averages_paths_of_successful_runs(
         '| scenario | m | n |', '| --- | --- | --- |',
         '| a | 1 / 2 | 0 / 1 |', '| b | 1 / 1 | 0 / 0 |', '| **total** | 2 / 3 | 0 / 1 |',
         '| mean paths (successful runs) | 4.5 | - |']
+
+
+def test_the_claims_compare_with_the_best_baseline_and_find_ranking_flips():
+    def cell(obstacles, method, success, ci=(0.0, 1.0)):
+        return {'setting': '2d', 'obstacles': obstacles, 'method': method,
+                'success': success, 'ci95': list(ci)}
+
+    summary = {'cells': [
+        cell(1, 'probabilistic', 0.9, (0.8, 0.95)), cell(1, 'hard:0.01', 0.5),
+        cell(1, 'hard:0.02', 0.7), cell(1, 'epsilon:0.2', 0.6),
+        cell(10, 'probabilistic', 0.6, (0.5, 0.7)), cell(10, 'hard:0.01', 0.65),
+        cell(10, 'hard:0.02', 0.4), cell(10, 'epsilon:0.2', 0.6)]}
+    verdicts = claims(summary)
+    rows = {b['obstacles']: b for b in verdicts['beats_every_baseline']}
+    assert (rows[1]['best_baseline'], rows[1]['at_least_as_good'], rows[1]['clear']) == \
+        ('hard:0.02', True, True)
+    assert (rows[10]['best_baseline'], rows[10]['at_least_as_good']) == ('hard:0.01', False)
+    assert verdicts['all_at_least_as_good'] is False
+    hard = next(f for f in verdicts['sensitivity'] if f['family'] == 'hard')
+    assert hard['best_by_obstacles'] == {1: 'hard:0.02', 10: 'hard:0.01'}
+    assert hard['best_changes'] and abs(hard['largest_gap'] - 0.25) < 1e-12
+    assert [f['family'] for f in verdicts['sensitivity']] == ['hard']   # one epsilon value

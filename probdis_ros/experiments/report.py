@@ -107,6 +107,75 @@ def markdown_table(summary: dict) -> str:
     return '\n'.join(lines) + '\n'
 
 
+def claims(summary: dict) -> dict:
+    """
+    Check the paper's two claims on a summary; return the rows and the verdicts.
+
+    1. Probabilistic succeeds (within the maximum number of paths) at least as often as every
+       baseline, per setting and obstacle count; ``clear`` where its 95 % interval lies above
+       the best baseline's rate.
+    2. The baselines are sensitive to their parameter: per setting and method family with
+       two or more values, whether the ranking of two values flips between obstacle counts
+       (one strictly better at one count, the other at another), and the largest gap
+       between its values.
+    """
+    cells: dict[tuple, dict[str, dict]] = defaultdict(dict)
+    for c in summary['cells']:
+        cells[(c['setting'], c['obstacles'])][c['method']] = c
+    beats = []
+    for (setting, obstacles), methods in sorted(cells.items()):
+        ours = methods.get('probabilistic')
+        others = {m: c for m, c in methods.items() if not m.startswith('probabilistic')}
+        if ours is None or not others:
+            continue
+        best = max(others, key=lambda m: others[m]['success'])
+        beats.append({'setting': setting, 'obstacles': obstacles,
+                      'probabilistic': ours['success'], 'ci95': ours['ci95'],
+                      'best_baseline': best, 'baseline': others[best]['success'],
+                      'at_least_as_good': ours['success'] >= others[best]['success'],
+                      'clear': ours['ci95'][0] > others[best]['success']})
+    families: dict[tuple, dict[int, dict[str, float]]] = defaultdict(lambda: defaultdict(dict))
+    for (setting, obstacles), methods in cells.items():
+        for method, c in methods.items():
+            families[(setting, method.split(':')[0])][obstacles][method] = c['success']
+    sensitivity = []
+    for (setting, family), by_count in sorted(families.items()):
+        values = sorted({m for rates in by_count.values() for m in rates})
+        if len(values) < 2:
+            continue
+        winners = {}
+        for n, rates in sorted(by_count.items()):
+            top = [m for m in values if rates.get(m) == max(rates.values())]
+            winners[n] = top[0] if len(top) == 1 else 'tie'
+        flips = any(any(r.get(a, -1) > r.get(b, 2) for r in by_count.values()) and
+                    any(r.get(b, -1) > r.get(a, 2) for r in by_count.values())
+                    for a in values for b in values if a < b)
+        gaps = [max(rates.values()) - min(rates.values()) for rates in by_count.values()]
+        sensitivity.append({'setting': setting, 'family': family, 'values': values,
+                            'best_by_obstacles': winners, 'best_changes': flips,
+                            'largest_gap': max(gaps)})
+    return {'beats_every_baseline': beats, 'sensitivity': sensitivity,
+            'all_at_least_as_good': all(b['at_least_as_good'] for b in beats)}
+
+
+def claims_markdown(verdicts: dict) -> str:
+    """Return the claims as two Markdown tables."""
+    lines = ['| setting | obstacles | probabilistic (95 % CI) | best baseline | its rate '
+             '| probabilistic >= every baseline |', '| --- | --- | --- | --- | --- | --- |']
+    for b in verdicts['beats_every_baseline']:
+        verdict = ('yes, clearly' if b['clear'] else 'yes') if b['at_least_as_good'] else 'NO'
+        lines.append(f'| {b["setting"]} | {b["obstacles"]} | {b["probabilistic"]:.2f} '
+                     f'({b["ci95"][0]:.2f}-{b["ci95"][1]:.2f}) | {b["best_baseline"]} | '
+                     f'{b["baseline"]:.2f} | {verdict} |')
+    lines += ['', '| setting | method | best value per obstacle count | ranking flips '
+              '| largest gap between values |', '| --- | --- | --- | --- | --- |']
+    for s in verdicts['sensitivity']:
+        best = ', '.join(f'{n}: {m}' for n, m in s['best_by_obstacles'].items())
+        lines.append(f'| {s["setting"]} | {s["family"]} | {best} | '
+                     f'{"yes" if s["best_changes"] else "no"} | {s["largest_gap"]:.2f} |')
+    return '\n'.join(lines) + '\n'
+
+
 def write_report(directory: str | Path) -> dict:
     """Read DIR/episodes.jsonl; write the PNGs, summary.json and summary.md into DIR."""
     from probdis_ros.plots import plot_sensitivity, plot_success_curves
@@ -117,8 +186,10 @@ def write_report(directory: str | Path) -> dict:
         raise ValueError(f'{directory / EPISODES_FILE}: no episodes (run probdis experiment '
                          'sweep first)')
     summary = summarise(records)
+    summary['claims'] = claims(summary)
     (directory / 'summary.json').write_text(json.dumps(summary, indent=1) + '\n')
-    (directory / 'summary.md').write_text(markdown_table(summary))
+    (directory / 'summary.md').write_text(markdown_table(summary) + '\n' +
+                                          claims_markdown(summary['claims']))
     plot_success_curves(summary, directory / 'success.png')
     plot_sensitivity(summary, directory / 'sensitivity.png')
     return summary
