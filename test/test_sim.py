@@ -73,9 +73,21 @@ def test_orientation_gated_obstacles_let_a_turned_flange_pass():
     assert not CompliantArm(arm, [ball]).execute(np.array(turned)).blocked
 
 
-def straight_loop(max_paths=20) -> Disentangler:
+def test_inside_a_ball_going_deeper_is_blocked_at_once_and_pulling_out_is_free():
+    """An end-effector that got into a ball turned away and then turned into it."""
+    ball = Obstacle('ball', [0.0, 0.0, 0.0], 1.0)
+    inside = np.array([[0.5, 0.0, 0.0]] * 3)
+    ends = np.array([[0.1, 0.0, 0.0], [0.9, 0.0, 0.0], [0.5, 2.0, 0.0]])
+    np.testing.assert_array_equal(ball.first_hit(inside, ends), [0.0, np.inf, np.inf])
+    # from outside, entering is still found where the segment meets the surface
+    t = ball.first_hit(np.array([[-2.0, 0.0, 0.0]]), np.array([[2.0, 0.0, 0.0]]))
+    np.testing.assert_allclose(t, [0.25])
+
+
+def straight_loop(max_paths=20, **kwargs) -> Disentangler:
     """Return a loop whose planner always goes straight to the goal, into the blocker."""
-    return Disentangler(PLANAR, EpsilonPlanner(PLANAR, epsilon=1.0), GOAL, max_paths=max_paths)
+    return Disentangler(PLANAR, EpsilonPlanner(PLANAR, epsilon=1.0), GOAL, max_paths=max_paths,
+                        **kwargs)
 
 
 def test_a_blocked_path_adds_exactly_one_failure_and_retreats_to_the_last_via_point():
@@ -97,6 +109,24 @@ def test_a_blocked_path_adds_exactly_one_failure_and_retreats_to_the_last_via_po
         loop.report_blocked(run.config, 0)
     loop.report_retreated(sim.execute(retreat).config)
     assert loop.state is State.READY and len(loop.fmap) == 1
+
+
+def test_a_path_blocked_where_it_started_retreats_along_the_way_the_arm_came():
+    sim = CompliantArm(PLANAR, [BLOCKER])
+    near = START.copy()
+    near[0] = np.pi / 2 + 0.06           # the tip 1.2 cm before the blocker
+    for min_retreat, expected in ((0.1, [near, START]), (0.0, [near])):
+        loop = straight_loop(min_retreat=min_retreat)
+        loop.next_path(START)
+        loop.attempts[-1].path = np.array([START, near])   # a path that stops short of it
+        loop.report_completed(sim.execute(loop.attempts[-1].path).config)
+        run = sim.execute(loop.next_path(near))             # straight on: blocked at once
+        assert run.blocked and np.linalg.norm(run.config - near) < 0.1
+        retreat = loop.report_blocked(run.config, run.segment)
+        np.testing.assert_array_equal(retreat, [run.config, *expected])
+        assert not sim.execute(retreat).blocked             # retracing is free
+        loop.report_retreated(retreat[-1])
+        assert len(loop.fmap) == 1 and loop.state is State.READY
 
 
 def test_the_loop_stops_after_n_iter_paths():

@@ -92,7 +92,10 @@ class Obstacle:
         """
         Return, per segment p0[i] -> p1[i], the fraction t in [0, 1] of first contact.
 
-        inf where the segment does not touch the obstacle; 0 where it starts inside.
+        inf where the segment does not touch the obstacle; 0 where it starts inside a ball
+        and goes deeper.  One that starts inside and moves outward is free: an end-effector
+        that passed into a ball turned away from it and then turned into it is stuck only
+        against going on, as a compliant arm pressed into clutter can still pull back out.
         """
         if self.kind == 'disc' and self.dim == 3:
             return self._plane_hit(p0, p1)
@@ -104,7 +107,7 @@ class Obstacle:
         disc = b * b - 4 * a * c
         t = np.full(len(p0), np.inf)
         inside = c < 0
-        t[inside] = 0.0
+        t[inside & (b < 0)] = 0.0
         ok = ~inside & (disc >= 0) & (a > 0)
         root = (-b[ok] - np.sqrt(disc[ok])) / (2 * a[ok])
         hit = (root >= 0) & (root <= 1)
