@@ -27,6 +27,14 @@ The simulator and the ROS planner node drive the same object::
 
 It stops on success, after ``max_paths`` paths (N_ITER), or when asked to (:meth:`stop`).
 A plan that finds no feasible path (possible for Hard) still counts as one of the paths.
+
+Decision beyond the paper: the retreat goes back to the last via point reached, as in the
+paper, but retraces the way the arm came (the via points it reached, path after path, which
+it has moved between without contact) until it is at least ``min_retreat`` from where it
+was blocked.  A path blocked on its first edge, right where it started, would otherwise
+retreat nowhere: the arm stays in contact, every next path is blocked at the same place, and
+the run ends after N_ITER failures at one point (seen in about 1 % of the 3-D sweep's
+episodes).  ``min_retreat = 0`` is the paper's rule.
 """
 
 from __future__ import annotations
@@ -42,6 +50,8 @@ from probdis_ros.model.failure_map import FailureMap
 
 #: Joint-space distance [rad] used to find the task-space direction of a blocked motion.
 DIRECTION_PROBE = 1e-3
+#: How far [rad, joint space] a retreat goes back at least, along the way the arm came.
+DEFAULT_MIN_RETREAT = 0.1
 
 
 def failure_from_block(arm: Arm, config: np.ndarray, joint_direction: np.ndarray
@@ -109,6 +119,7 @@ class Disentangler:
     max_paths: int = 20
     seed: int = 0
     goal_tolerance: float = 1e-3
+    min_retreat: float = DEFAULT_MIN_RETREAT
     state: State = State.READY
     attempts: list[Attempt] = field(default_factory=list)
 
@@ -119,10 +130,13 @@ class Disentangler:
             raise ValueError(f'goal is outside the joint limits: {self.goal}')
         if self.max_paths < 1:
             raise ValueError('max_paths must be at least 1')
+        if self.min_retreat < 0:
+            raise ValueError('min_retreat must be >= 0')
         if self.fmap is None:
             self.fmap = FailureMap(self.arm.task_space)
         self.rng = np.random.default_rng(self.seed)
-        self._retreat_target: np.ndarray | None = None
+        # the way the arm came: configurations it moved between without contact, in order
+        self._route: list[np.ndarray] = []
 
     @property
     def paths_tried(self) -> int:
@@ -145,6 +159,8 @@ class Disentangler:
             return None
         self._expect(State.READY)
         current = self.arm.as_batch(current)[0]
+        if not self._route or not np.array_equal(self._route[-1], current):
+            self._route.append(current.copy())
         while self.paths_tried < self.max_paths:
             t0 = time.perf_counter()
             plan = self.planner.plan(current, self.goal, self.fmap, self.rng)
@@ -162,6 +178,7 @@ class Disentangler:
         """Report that the whole path ran; success if the arm is at the goal."""
         self._expect(State.EXECUTING)
         current = self.arm.as_batch(current)[0]
+        self._route += [q.copy() for q in self.attempts[-1].path[1:-1]] + [current.copy()]
         if np.linalg.norm(current - self.goal) <= self.goal_tolerance:
             self.state = State.SUCCEEDED
         elif self.paths_tried >= self.max_paths:
@@ -174,7 +191,8 @@ class Disentangler:
         Report a block at config while executing edge ``segment`` of the current path.
 
         Adds exactly one failure (where, moving which way, with which orientation) and
-        returns the retreat path to the last via point reached.
+        returns the retreat path: back to the last via point reached and on along the way the
+        arm came until ``min_retreat`` from config (or back at the start of the run).
         """
         self._expect(State.EXECUTING)
         attempt = self.attempts[-1]
@@ -183,9 +201,14 @@ class Disentangler:
         config = self.arm.as_batch(config)[0]
         attempt.blocked_at, attempt.segment = config.copy(), segment
         self.fmap.add(*self.failure_at(config, attempt.path[segment + 1] - attempt.path[segment]))
-        self._retreat_target = attempt.path[segment].copy()
+        self._route += [q.copy() for q in attempt.path[1:segment + 1]]
+        back = len(self._route) - 1
+        while back > 0 and np.linalg.norm(self._route[back] - config) < self.min_retreat:
+            back -= 1
+        retreat = [config, *self._route[back:][::-1]]
+        del self._route[back + 1:]      # the arm retraces these; the route ends at the target
         self.state = State.RETREATING
-        return np.array([config, self._retreat_target])
+        return np.array(retreat)
 
     def failure_at(self, config: np.ndarray, joint_direction: np.ndarray
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
