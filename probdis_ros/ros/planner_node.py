@@ -100,6 +100,9 @@ PARAMETERS = {
     'state_timeout': (0.5, _float('joint states older than this stop the run [s]',
                                   0.01, 10.0)),
     'max_paths': (20, _int('N_ITER: paths before giving up', 1, 1000)),
+    'min_retreat': (0.1, _float('a retreat goes back along the way the arm came until this '
+                                'far from the block [rad]; 0: to the last via point only',
+                                0.0, 10.0)),
     'method': ('probabilistic', ParameterDescriptor(
         description='probabilistic | hard | epsilon')),
     'threshold': (0.01, _float('Y of the hard method', 0.0, 1.0)),
@@ -276,7 +279,8 @@ class PlannerNode(Node):
         self.loop = Disentangler(self.arm, planner, np.asarray(goal, dtype=float), self.fmap,
                                  max_paths=self.get_parameter('max_paths').value,
                                  seed=self.get_parameter('seed').value,
-                                 goal_tolerance=self.get_parameter('goal_tolerance').value)
+                                 goal_tolerance=self.get_parameter('goal_tolerance').value,
+                                 min_retreat=self.get_parameter('min_retreat').value)
         self.latencies, self.outcome = [], ''
         self._open_bag()
         self._plan_from(self.measured)

@@ -65,9 +65,17 @@ def run_robot_experiment(out: Path, scenarios: list[str], methods: list[Method],
     with path.open('a') as stream:
         for number, (scenario, method, run) in enumerate(todo, start=1):
             t0 = time.monotonic()
-            result = run_demo(scenario, timeout, quiet=True, extra_planner_args=(
-                *planner_arguments(method, run, velocity_scaling),
-                '-p', f'bag_dir:={out / "bags"}'))
+            args = (*planner_arguments(method, run, velocity_scaling),
+                    '-p', f'bag_dir:={out / "bags"}')
+            try:
+                result = run_demo(scenario, timeout, quiet=True, extra_planner_args=args)
+            except (RuntimeError, TimeoutError) as err:
+                # the nodes did not come up or answer (DDS, a busy machine): the run did not
+                # happen; try it once more, then stop (a rerun resumes here)
+                if progress:
+                    progress(f'{scenario} {method} run {run}: {err}; trying again')
+                t0 = time.monotonic()
+                result = run_demo(scenario, timeout, quiet=True, extra_planner_args=args)
             record = {'scenario': scenario, 'method': str(method), 'run': run, 'seed': run,
                       'success': result['success'], 'paths': result['paths'],
                       'failures': result['failures'], 'wall_s': time.monotonic() - t0,
