@@ -187,14 +187,31 @@ def plot_replay(result, out: str | Path, d_dist: float) -> Path:
 
 
 def _grid(summary: dict):
-    """Return the settings, obstacle counts and methods of a sweep summary, sorted."""
+    """
+    Return the settings, each setting's obstacle counts and the methods of a summary, sorted.
+
+    Counts are per setting: the paper runs the orientation setting with more obstacles.
+    """
     cells = summary['cells']
     order = {'2d': 0, '3d': 1, '3d-orient': 2}
     settings = sorted({c['setting'] for c in cells}, key=lambda s: order.get(s, 9))
-    counts = sorted({c['obstacles'] for c in cells})
+    counts = {s: sorted({c['obstacles'] for c in cells if c['setting'] == s}) for s in settings}
     methods = sorted({c['method'] for c in cells},
                      key=lambda m: (m.split(':')[0] != 'probabilistic', m))
     return settings, counts, methods
+
+
+def _legend_below(fig, axes, methods: list[str]) -> None:
+    """Put one legend for the whole figure under its panels."""
+    handles, labels = axes.flat[0].get_legend_handles_labels()
+    for ax in axes.flat[1:]:
+        for handle, label in zip(*ax.get_legend_handles_labels()):
+            if label not in labels:
+                handles.append(handle)
+                labels.append(label)
+    ordered = [(handles[labels.index(m)], m) for m in methods if m in labels]
+    fig.legend([h for h, _ in ordered], [m for _, m in ordered], loc='lower center',
+               ncol=len(ordered), fontsize=8, bbox_to_anchor=(0.5, -0.04), frameon=False)
 
 
 def plot_success_curves(summary: dict, out: str | Path) -> Path:
@@ -204,11 +221,13 @@ def plot_success_curves(summary: dict, out: str | Path) -> Path:
     import matplotlib.pyplot as plt
 
     settings, counts, methods = _grid(summary)
-    fig, axes = plt.subplots(len(settings), len(counts), squeeze=False, sharex=True,
-                             sharey=True, figsize=(3.2 * len(counts), 2.6 * len(settings)))
+    columns = max(len(c) for c in counts.values())
+    fig, axes = plt.subplots(len(settings), columns, squeeze=False, sharex=True,
+                             sharey=True, figsize=(3.2 * columns, 2.6 * len(settings)))
     colors = {m: plt.cm.tab10(k) for k, m in enumerate(methods)}
     for cell in summary['cells']:
-        ax = axes[settings.index(cell['setting']), counts.index(cell['obstacles'])]
+        ax = axes[settings.index(cell['setting']),
+                  counts[cell['setting']].index(cell['obstacles'])]
         n = np.arange(1, cell['max_paths'] + 1)
         curve = cell['curve']
         ax.step(n, curve['rate'], where='post', color=colors[cell['method']], lw=1.5,
@@ -216,18 +235,20 @@ def plot_success_curves(summary: dict, out: str | Path) -> Path:
         ax.fill_between(n, curve['low'], curve['high'], step='post',
                         color=colors[cell['method']], alpha=0.15, lw=0)
     for r, setting in enumerate(settings):
-        for k, count in enumerate(counts):
+        for k in range(columns):
             ax = axes[r, k]
-            ax.set_title(f'{setting}, {count} obstacles', fontsize=9)
+            if k >= len(counts[setting]):
+                ax.set_visible(False)
+                continue
+            ax.set_title(f'{setting}, {counts[setting][k]} obstacles', fontsize=9)
             ax.set_ylim(0, 1.02)
             ax.grid(alpha=0.3)
-            if r == len(settings) - 1:
-                ax.set_xlabel('max. planned paths')
+            ax.set_xlabel('max. planned paths')
             if k == 0:
                 ax.set_ylabel('success rate')
-    axes[0, 0].legend(fontsize=7, loc='lower right')
     fig.suptitle('success within n paths (bands: 95 % bootstrap CI over worlds)', y=1.0)
     fig.tight_layout()
+    _legend_below(fig, axes, methods)
     return _save(fig, out)
 
 
@@ -239,26 +260,30 @@ def plot_sensitivity(summary: dict, out: str | Path) -> Path:
 
     settings, counts, methods = _grid(summary)
     fig, axes = plt.subplots(1, len(settings), squeeze=False, sharey=True,
-                             figsize=(4.2 * len(settings), 3.2))
+                             figsize=(4.6 * len(settings), 3.4))
     width = 0.8 / len(methods)
     for s, setting in enumerate(settings):
         ax = axes[0, s]
         for m, method in enumerate(methods):
             cells = {c['obstacles']: c for c in summary['cells']
                      if c['setting'] == setting and c['method'] == method}
-            x = np.arange(len(counts)) + (m - (len(methods) - 1) / 2) * width
-            rate = np.array([cells[n]['success'] if n in cells else np.nan for n in counts])
-            low = np.array([cells[n]['ci95'][0] if n in cells else np.nan for n in counts])
-            high = np.array([cells[n]['ci95'][1] if n in cells else np.nan for n in counts])
+            x = np.arange(len(counts[setting])) + (m - (len(methods) - 1) / 2) * width
+            rate = np.array([cells[n]['success'] if n in cells else np.nan
+                             for n in counts[setting]])
+            low = np.array([cells[n]['ci95'][0] if n in cells else np.nan
+                            for n in counts[setting]])
+            high = np.array([cells[n]['ci95'][1] if n in cells else np.nan
+                             for n in counts[setting]])
             ax.bar(x, rate, width, yerr=[rate - low, high - rate], capsize=2, label=method,
                    color=plt.cm.tab10(m))
-        ax.set_xticks(np.arange(len(counts)), [str(n) for n in counts])
+        ax.set_xticks(np.arange(len(counts[setting])), [str(n) for n in counts[setting]])
         ax.set_xlabel('obstacles')
         ax.set_title(setting)
         ax.set_ylim(0, 1.05)
         ax.grid(axis='y', alpha=0.3)
     axes[0, 0].set_ylabel('success within the maximum paths')
-    axes[0, -1].legend(fontsize=7)
+    fig.tight_layout()
+    _legend_below(fig, axes, methods)
     return _save(fig, out)
 
 
