@@ -32,9 +32,9 @@ Decision beyond the paper: the retreat goes back to the last via point reached, 
 paper, but retraces the way the arm came (the via points it reached, path after path, which
 it has moved between without contact) until it is at least ``min_retreat`` from where it
 was blocked.  A path blocked on its first edge, right where it started, would otherwise
-retreat nowhere: the arm stays in contact, every next path is blocked at the same place, and
-the run ends after N_ITER failures at one point (seen in about 1 % of the 3-D sweep's
-episodes).  ``min_retreat = 0`` is the paper's rule.
+retreat nowhere: the arm stays in contact, every next path may be blocked at the same
+place, and the run ends after N_ITER failures at one point (seen in 3-D sweep episodes).
+``min_retreat = 0`` is the paper's rule.
 """
 
 from __future__ import annotations

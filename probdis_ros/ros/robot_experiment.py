@@ -34,8 +34,6 @@ import time
 from probdis_ros.experiments.sweep import Method, read_episodes
 
 RUNS_FILE = 'robot_runs.jsonl'
-SCENARIOS = ('robot_waste', 'robot_maze', 'robot_bunny')
-METHODS = ('epsilon:0.2', 'hard:0.01', 'probabilistic')
 
 
 def planner_arguments(method: Method, seed: int, velocity_scaling: float) -> list[str]:
