@@ -44,5 +44,8 @@ def run_node(name: str, factory: Callable[[], Node], args: list[str] | None = No
     finally:
         if node is not None:
             node.destroy_node()
-        rclpy.try_shutdown()
+        try:
+            rclpy.try_shutdown()
+        except RCLError:
+            pass             # the signal handler shut the context down at the same moment
     return 0
