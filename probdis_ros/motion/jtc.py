@@ -1,0 +1,248 @@
+# Copyright 2026 probdis_ros contributors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+
+"""
+joint_trajectory_controller's rules, written once (no rclpy).
+
+The mock arm, the planner's blocked-motion detector and ``probdis replay`` all ask "where
+does the controller command the arm at time t?" and must get the same answer, so this module
+is the only place that answers it.  It follows ros2_controllers' JTC (Jazzy) on its topic
+interface, as the lbr stack runs it:
+
+* A new message replaces the running trajectory.  It is taken at the next controller update
+  ``t0``: its times count from ``header.stamp``, or from ``t0`` where the stamp is zero.
+* The first segment starts from the *measured* state at ``t0`` (positions and velocities;
+  ``interpolate_from_desired_state`` is false by default), the "point before" the message.
+* Each segment is interpolated from what both of its ends carry: linear where either end
+  lacks velocities (a velocity step at every via point), cubic with positions and velocities
+  at both ends, quintic with accelerations too.  The measured state carries no accelerations
+  (the lbr stack exports position and velocity), so the first segment is at most cubic.
+* After the last point the controller holds that point.
+* Every update at time t commands the sample at ``t + period`` (one period ahead).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+#: The lbr stack's ros2_control update rate [Hz].
+CONTROLLER_RATE = 100.0
+
+
+@dataclass(frozen=True)
+class TrajectoryCommand:
+    """
+    The content of a JointTrajectory in the arm's joint order.
+
+    ``velocities`` and ``accelerations`` are ``(M, n)`` with a row of NaN where a point does
+    not carry the field (JTC accepts mixed fields point by point), or None where no point
+    does.  ``stamp`` is ``header.stamp`` in seconds; 0 starts the trajectory when the
+    controller takes it.
+    """
+
+    times: np.ndarray
+    positions: np.ndarray
+    velocities: np.ndarray | None = None
+    accelerations: np.ndarray | None = None
+    stamp: float = 0.0
+
+    def __post_init__(self) -> None:
+        """Check shapes and times; JTC refuses what this refuses."""
+        times = np.asarray(self.times, dtype=float).reshape(-1)
+        positions = np.atleast_2d(np.asarray(self.positions, dtype=float))
+        if len(times) == 0 or len(times) != len(positions):
+            raise ValueError(f'{len(times)} times for {len(positions)} points')
+        if np.any(np.diff(times) <= 0) or times[0] < 0:
+            raise ValueError('time_from_start must be non-negative and strictly increasing')
+        object.__setattr__(self, 'times', times)
+        object.__setattr__(self, 'positions', positions)
+        for name in ('velocities', 'accelerations'):
+            value = getattr(self, name)
+            if value is not None:
+                value = np.asarray(value, dtype=float)
+                if value.shape != positions.shape:
+                    raise ValueError(f'{name} of shape {value.shape} for positions '
+                                     f'{positions.shape}')
+                object.__setattr__(self, name, value)
+
+    def field(self, name: str, k: int) -> np.ndarray | None:
+        """Return point k's velocities or accelerations, None where it does not carry them."""
+        values = getattr(self, name)
+        if values is None or np.isnan(values[k]).any():
+            return None
+        return values[k]
+
+
+def interpolate(t: float, duration: float,
+                start: tuple[np.ndarray, np.ndarray | None, np.ndarray | None],
+                end: tuple[np.ndarray, np.ndarray | None, np.ndarray | None]
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """
+    Return (position, velocity, acceleration) t seconds into a segment, as JTC computes it.
+
+    start and end are (positions, velocities or None, accelerations or None).  Outside the
+    segment the sample is clamped to its ends and interpolated linearly, as JTC does.
+    """
+    p0, v0, a0 = start
+    p1, v1, a1 = end
+    cubic = v0 is not None and v1 is not None
+    quintic = cubic and a0 is not None and a1 is not None
+    if t < 0.0:
+        t, cubic, quintic = 0.0, False, False
+    if t > duration:
+        t, cubic, quintic = duration, False, False
+    if not cubic:
+        slope = (p1 - p0) / duration if duration > 0 else np.zeros_like(p0)
+        return p0 + slope * t, slope, np.zeros_like(p0)
+    d = duration
+    if not quintic:
+        c2 = (-3 * p0 + 3 * p1 - 2 * v0 * d - v1 * d) / d ** 2 if d > 0 else 0 * p0
+        c3 = (2 * p0 - 2 * p1 + v0 * d + v1 * d) / d ** 3 if d > 0 else 0 * p0
+        return (p0 + v0 * t + c2 * t ** 2 + c3 * t ** 3,
+                v0 + 2 * c2 * t + 3 * c3 * t ** 2,
+                2 * c2 + 6 * c3 * t)
+    c2 = 0.5 * a0
+    if d > 0:
+        c3 = (-20 * p0 + 20 * p1 - 3 * a0 * d ** 2 + a1 * d ** 2 - 12 * v0 * d - 8 * v1 * d) / (
+            2 * d ** 3)
+        c4 = (30 * p0 - 30 * p1 + 3 * a0 * d ** 2 - 2 * a1 * d ** 2 + 16 * v0 * d
+              + 14 * v1 * d) / (2 * d ** 4)
+        c5 = (-12 * p0 + 12 * p1 - a0 * d ** 2 + a1 * d ** 2 - 6 * v0 * d - 6 * v1 * d) / (
+            2 * d ** 5)
+    else:
+        c3 = c4 = c5 = 0 * p0
+    return (p0 + v0 * t + c2 * t ** 2 + c3 * t ** 3 + c4 * t ** 4 + c5 * t ** 5,
+            v0 + 2 * c2 * t + 3 * c3 * t ** 2 + 4 * c4 * t ** 3 + 5 * c5 * t ** 4,
+            2 * c2 + 6 * c3 * t + 12 * c4 * t ** 2 + 20 * c5 * t ** 3)
+
+
+class JtcTrajectory:
+    """
+    One command as JTC executes it, from the measured state at the update that took it.
+
+    Times here are relative to ``taken_at`` (the controller update that took the message):
+    ``sample(0)`` is the measured state then, ``duration`` the time the last point is
+    reached.  ``at`` and ``segment_at`` give the detector what it needs.
+    """
+
+    def __init__(self, command: TrajectoryCommand, q_measured: np.ndarray,
+                 v_measured: np.ndarray | None = None, taken_at: float = 0.0) -> None:
+        self.command = command
+        self.taken_at = float(taken_at)
+        self.before = (np.asarray(q_measured, dtype=float).copy(),
+                       None if v_measured is None else np.asarray(v_measured, dtype=float),
+                       None)
+        # times of the message's points relative to taken_at
+        offset = command.stamp - self.taken_at if command.stamp > 0 else 0.0
+        self.times = command.times + offset
+
+    @property
+    def duration(self) -> float:
+        """Return when the last point is reached, relative to taken_at [s]."""
+        return float(self.times[-1])
+
+    @property
+    def points(self) -> np.ndarray:
+        """Return the measured start and the message's points, ``(M + 1, n)``."""
+        return np.vstack([self.before[0], self.command.positions])
+
+    def _point(self, k: int) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+        c = self.command
+        return c.positions[k], c.field('velocities', k), c.field('accelerations', k)
+
+    def sample(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Return the desired (position, velocity, acceleration) t seconds after taken_at."""
+        times = self.times
+        if t < times[0]:
+            return interpolate(t, times[0], self.before, self._point(0))
+        if t >= times[-1]:
+            p = self.command.positions[-1]
+            v, a = self._point(len(times) - 1)[1:]
+            zero = np.zeros_like(p)
+            return p.copy(), zero if v is None else v, zero if a is None else a
+        k = int(np.searchsorted(times, t, side='right')) - 1
+        return interpolate(t - times[k], times[k + 1] - times[k], self._point(k),
+                           self._point(k + 1))
+
+    def at(self, t: float) -> np.ndarray:
+        """Return the desired position t seconds after taken_at."""
+        return self.sample(t)[0]
+
+    def segment_at(self, t: float) -> int:
+        """
+        Return the segment running at time t, counting from the measured start.
+
+        Segment 0 goes from the measured state to the first point; k from point k-1 to k.
+        """
+        k = int(np.searchsorted(self.times, t, side='right'))
+        return int(np.clip(k, 0, len(self.times) - 1))
+
+
+class TrajectoryController:
+    """
+    JTC's update loop: takes the newest message at its next update, commands one period ahead.
+
+    Before any message, and after a message's last point, it holds (the first measured
+    position, or the last point).
+    """
+
+    def __init__(self, period: float = 1.0 / CONTROLLER_RATE) -> None:
+        self.period = period
+        self.trajectory: JtcTrajectory | None = None
+        self._pending: TrajectoryCommand | None = None
+        self._hold: np.ndarray | None = None
+
+    def receive(self, command: TrajectoryCommand) -> None:
+        """Take a new message; it replaces the running trajectory at the next update."""
+        self._pending = command
+
+    def update(self, now: float, q_measured: np.ndarray,
+               v_measured: np.ndarray | None = None) -> np.ndarray:
+        """Return the position command of the update at time now."""
+        if self._pending is not None:
+            self.trajectory = JtcTrajectory(self._pending, q_measured, v_measured, now)
+            self._pending = None
+        if self.trajectory is None:
+            if self._hold is None:
+                self._hold = np.asarray(q_measured, dtype=float).copy()
+            return self._hold.copy()
+        return self.trajectory.at(now + self.period - self.trajectory.taken_at)
+
+
+class FirstOrderFilter:
+    """
+    The lbr stack driver's command filter: first order with time constant tau [s].
+
+    From PR #220 on, the driver smooths every position command before it goes to FRI;
+    tau = 0 passes commands through (older releases and the kinematic mock).
+    """
+
+    def __init__(self, tau: float = 0.04, period: float = 1.0 / CONTROLLER_RATE) -> None:
+        self.alpha = 1.0 if tau <= 0 else 1.0 - float(np.exp(-period / tau))
+        self.value: np.ndarray | None = None
+
+    def reset(self, value: np.ndarray) -> None:
+        """Start from value (the measured position when the driver starts)."""
+        self.value = np.asarray(value, dtype=float).copy()
+
+    def __call__(self, command: np.ndarray) -> np.ndarray:
+        """Return the filtered command of one driver cycle."""
+        if self.value is None:
+            self.reset(command)
+        else:
+            self.value = self.value + self.alpha * (np.asarray(command, dtype=float) - self.value)
+        return self.value.copy()

@@ -1,0 +1,137 @@
+# Copyright 2026 probdis_ros contributors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+
+"""joint_trajectory_controller's interpolation rules on hand-computed cases."""
+
+import numpy as np
+from probdis_ros.motion.jtc import (
+    FirstOrderFilter,
+    JtcTrajectory,
+    TrajectoryCommand,
+    TrajectoryController,
+)
+import pytest
+
+
+def one_joint(times, positions, velocities=None, accelerations=None, stamp=0.0):
+    def column(values):
+        if values is None:
+            return None
+        return np.array([[np.nan] if v is None else [v] for v in values], dtype=float)
+    return TrajectoryCommand(np.array(times, dtype=float), np.array(positions, float)[:, None],
+                             column(velocities), column(accelerations), stamp)
+
+
+def test_positions_only_is_linear_with_a_velocity_step_at_each_point():
+    traj = JtcTrajectory(one_joint([1.0, 2.0], [1.0, 3.0]), np.zeros(1), np.zeros(1))
+    q, v, a = traj.sample(0.25)
+    assert q == pytest.approx([0.25]) and v == pytest.approx([1.0]) and a == pytest.approx([0])
+    q, v, _ = traj.sample(1.5)
+    assert q == pytest.approx([2.0]) and v == pytest.approx([2.0])   # the step: 1 -> 2 rad/s
+
+
+def test_velocities_at_both_ends_make_a_cubic():
+    # from rest at 0 to rest at 1 in 1 s: q = 3 t^2 - 2 t^3
+    traj = JtcTrajectory(one_joint([1.0], [1.0], [0.0]), np.zeros(1), np.zeros(1))
+    q, v, a = traj.sample(0.25)
+    assert q == pytest.approx([0.15625])
+    assert v == pytest.approx([6 * 0.25 - 6 * 0.25 ** 2])
+    assert a == pytest.approx([6 - 12 * 0.25])
+
+
+def test_a_one_point_command_with_a_final_velocity_runs_as_a_cubic_not_a_line():
+    # the hold the planner used to send: its peak speed is 1.5x the line's
+    traj = JtcTrajectory(one_joint([1.0], [1.0], [0.0]), np.zeros(1), np.zeros(1))
+    assert traj.sample(0.5)[1] == pytest.approx([1.5])
+
+
+def test_accelerations_at_both_ends_make_a_quintic():
+    # between two points at rest: minimum jerk 10 t^3 - 15 t^4 + 6 t^5
+    cmd = one_joint([0.5, 1.5], [0.0, 1.0], [0.0, 0.0], [0.0, 0.0])
+    traj = JtcTrajectory(cmd, np.zeros(1), np.zeros(1))
+    q, v, _ = traj.sample(0.75)
+    assert q == pytest.approx([0.103515625])
+    assert v == pytest.approx([30 * 0.25 ** 2 - 60 * 0.25 ** 3 + 30 * 0.25 ** 4])
+    assert traj.sample(1.0)[0] == pytest.approx([0.5])
+
+
+def test_the_first_segment_is_at_most_cubic_since_the_measured_state_has_no_accelerations():
+    cmd = one_joint([1.0], [1.0], [0.0], [0.0])
+    traj = JtcTrajectory(cmd, np.zeros(1), np.zeros(1))
+    assert traj.sample(0.25)[0] == pytest.approx([0.15625])     # the cubic, not the quintic
+
+
+def test_a_first_point_without_velocities_makes_the_first_segment_linear():
+    traj = JtcTrajectory(one_joint([2.0], [1.0]), np.zeros(1), np.array([5.0]))
+    assert traj.sample(1.0)[0] == pytest.approx([0.5])
+    assert traj.sample(1.0)[1] == pytest.approx([0.5])
+
+
+def test_mixed_fields_are_taken_point_by_point():
+    cmd = one_joint([1.0, 2.0, 3.0], [1.0, 2.0, 3.0], [1.0, None, 0.0])
+    traj = JtcTrajectory(cmd, np.zeros(1), np.zeros(1))
+    # segment 1 -> 2 lacks a velocity at its end: linear; 0 -> 1 has both: cubic
+    assert traj.sample(1.5)[0] == pytest.approx([1.5])
+    q = traj.sample(0.5)[0]
+    p0, v0, p1, v1, d, t = 0.0, 0.0, 1.0, 1.0, 1.0, 0.5
+    c2 = (-3 * p0 + 3 * p1 - 2 * v0 * d - v1 * d) / d ** 2
+    c3 = (2 * p0 - 2 * p1 + v0 * d + v1 * d) / d ** 3
+    assert q == pytest.approx([c2 * t ** 2 + c3 * t ** 3])
+
+
+def test_after_the_last_point_the_controller_holds_it():
+    traj = JtcTrajectory(one_joint([1.0], [1.0]), np.zeros(1), np.zeros(1))
+    q, v, a = traj.sample(7.0)
+    assert q == pytest.approx([1.0]) and v == pytest.approx([0]) and a == pytest.approx([0])
+    assert traj.duration == 1.0 and traj.segment_at(0.5) == 0 and traj.segment_at(9) == 0
+
+
+def test_segments_count_from_the_measured_start():
+    traj = JtcTrajectory(one_joint([1.0, 2.0, 3.0], [1.0, 2.0, 3.0]), np.zeros(1))
+    assert [traj.segment_at(t) for t in (0.0, 0.99, 1.0, 2.5, 3.5)] == [0, 0, 1, 2, 2]
+
+
+def test_a_stamp_in_the_future_delays_the_start():
+    traj = JtcTrajectory(one_joint([1.0], [1.0], stamp=10.5), np.zeros(1), taken_at=10.0)
+    assert traj.duration == pytest.approx(1.5)
+    assert traj.sample(0.75)[0] == pytest.approx([0.5])
+
+
+def test_the_controller_commands_one_period_ahead_and_a_new_message_replaces_the_old():
+    jtc = TrajectoryController(period=0.01)
+    assert jtc.update(0.0, np.array([0.2])) == pytest.approx([0.2])        # holds at start
+    jtc.receive(one_joint([1.0], [1.0]))
+    assert jtc.update(1.0, np.array([0.0]), np.zeros(1)) == pytest.approx([0.01])
+    assert jtc.update(1.5, np.array([0.3])) == pytest.approx([0.51])
+    # replaced mid-motion: the new trajectory starts from the measured 0.3, not from 0.51
+    jtc.receive(one_joint([1.0], [-0.7]))
+    assert jtc.update(1.6, np.array([0.3]), np.zeros(1)) == pytest.approx([0.3 - 0.01])
+    assert jtc.update(5.0, np.array([0.0])) == pytest.approx([-0.7])       # holds the end
+
+
+def test_refuses_times_that_do_not_increase_and_shapes_that_do_not_match():
+    with pytest.raises(ValueError, match='increasing'):
+        one_joint([1.0, 1.0], [0.0, 1.0])
+    with pytest.raises(ValueError, match='shape'):
+        TrajectoryCommand(np.array([1.0]), np.zeros((1, 2)), np.zeros((1, 3)))
+
+
+def test_the_driver_filter_is_first_order_with_its_time_constant():
+    f = FirstOrderFilter(tau=0.04, period=0.01)
+    f.reset(np.zeros(1))
+    for _ in range(4):
+        out = f(np.ones(1))
+    assert out == pytest.approx([1 - np.exp(-0.04 / 0.04)])
+    assert FirstOrderFilter(tau=0.0)(np.array([3.0])) == pytest.approx([3.0])
