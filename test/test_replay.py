@@ -171,7 +171,8 @@ def test_replay_of_a_recorded_mock_run_finds_the_live_blocks(tmp_path):
             Parameter('bag_dir', value=str(tmp_path / 'bags')),
             Parameter('velocity_scaling', value=1.0), Parameter('state_timeout', value=2.0)]))
         env = dict(os.environ, ROS_DOMAIN_ID=str(ros.domain))
-        arm = subprocess.Popen([sys.executable, '-m', 'probdis_ros.ros.mock_iiwa_node'], env=env)
+        arm = subprocess.Popen([sys.executable, '-m', 'probdis_ros.ros.mock_iiwa_node',
+                                '--ros-args', '-p', 'engine:=kinematic'], env=env)
         try:
             wait_for(lambda: ros.call('start', timeout=30).success, 30, 'start')
             wait_for(lambda: ros.status.get('state') in ('succeeded', 'gave_up', 'stopped'),
@@ -203,6 +204,7 @@ def test_the_bag_is_readable_after_the_node_is_killed_mid_run(tmp_path, sig):
     ros = RosTest()
     try:
         ros.add(MockIiwa(context=ros.context, parameter_overrides=[
+            Parameter('engine', value='kinematic'),
             Parameter('scenario', value=str(scenario_path('demo_iiwa')))]))
         env = dict(os.environ, ROS_DOMAIN_ID=str(ros.domain))
         node = subprocess.Popen([sys.executable, '-m', 'probdis_ros.ros.planner_node',

@@ -58,7 +58,8 @@ def planner(ros, tmp_path, **params):
 
 
 def mock(ros, scenario=None, **params):
-    overrides = [Parameter('scenario', value=str(scenario or scenario_path('demo_iiwa')))]
+    overrides = [Parameter('engine', value='kinematic'),
+                 Parameter('scenario', value=str(scenario or scenario_path('demo_iiwa')))]
     overrides += [Parameter(k, value=v) for k, v in params.items()]
     return ros.add(MockIiwa(context=ros.context, parameter_overrides=overrides))
 
@@ -229,7 +230,7 @@ def test_stop_during_planning_sends_no_path(ros, tmp_path):
 def mock_process(ros, *params):
     """Run the mock iiwa as its own process in the test's domain."""
     env = dict(os.environ, ROS_DOMAIN_ID=str(ros.domain))
-    args = [a for p in params for a in ('-p', p)]
+    args = [a for p in ('engine:=kinematic', *params) for a in ('-p', p)]
     return subprocess.Popen([sys.executable, '-m', 'probdis_ros.ros.mock_iiwa_node',
                              '--ros-args', *args], env=env)
 

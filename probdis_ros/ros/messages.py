@@ -24,6 +24,7 @@ from __future__ import annotations
 
 from builtin_interfaces.msg import Duration
 import numpy as np
+from probdis_ros.motion.jtc import TrajectoryCommand
 from probdis_ros.ros.trajectory import TimedPath
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
@@ -49,8 +50,8 @@ def joint_positions(msg: JointState, joint_names: list[str]) -> np.ndarray:
 
 def duration(seconds: float) -> Duration:
     """Return a builtin_interfaces Duration."""
-    sec = int(np.floor(seconds))
-    return Duration(sec=sec, nanosec=round((seconds - sec) * 1e9) % 1_000_000_000)
+    nanoseconds = round(seconds * 1e9)     # 1.9999999997 s is 2 s, not 1 s
+    return Duration(sec=nanoseconds // 1_000_000_000, nanosec=nanoseconds % 1_000_000_000)
 
 
 def to_seconds(d: Duration) -> float:
@@ -86,10 +87,19 @@ def hold_msg(config: np.ndarray, joint_names: list[str], after: float) -> JointT
     return msg
 
 
-def timed_path_from_msg(msg: JointTrajectory, joint_names: list[str], current: np.ndarray,
-                        lower: np.ndarray, upper: np.ndarray) -> TimedPath:
+def joint_velocities(msg: JointState, joint_names: list[str]) -> np.ndarray | None:
+    """Return the velocities of joint_names from msg, None where it carries none usable."""
+    if len(msg.velocity) != len(msg.name):
+        return None
+    index = {name: i for i, name in enumerate(msg.name)}
+    v = np.array([msg.velocity[index[name]] for name in joint_names], dtype=float)
+    return v if np.all(np.isfinite(v)) else None
+
+
+def command_from_msg(msg: JointTrajectory, joint_names: list[str], lower: np.ndarray,
+                     upper: np.ndarray) -> TrajectoryCommand:
     """
-    Return the motion a trajectory command asks for, starting from current.
+    Return what a trajectory command asks JTC for, in the order of joint_names.
 
     Raises ValueError for a command that must not be executed: unknown or missing joints,
     no points, wrong lengths, non-finite or out-of-limit positions, times not increasing.
@@ -100,20 +110,31 @@ def timed_path_from_msg(msg: JointTrajectory, joint_names: list[str], current: n
     missing = [name for name in joint_names if name not in index]
     if missing:
         raise ValueError(f'trajectory lacks joints {", ".join(missing)}')
-    points = [current]
-    times = [0.0]
+    order = [index[name] for name in joint_names]
+    n, m = len(joint_names), len(msg.points)
+    positions = np.empty((m, n))
+    fields = {'velocities': np.full((m, n), np.nan), 'accelerations': np.full((m, n), np.nan)}
+    times = np.empty(m)
     for k, point in enumerate(msg.points):
         if len(point.positions) != len(msg.joint_names):
             raise ValueError(f'point {k} has {len(point.positions)} positions for '
                              f'{len(msg.joint_names)} joints')
-        q = np.array([point.positions[index[name]] for name in joint_names], dtype=float)
-        if not np.all(np.isfinite(q)):
+        positions[k] = np.asarray(point.positions, dtype=float)[order]
+        if not np.all(np.isfinite(positions[k])):
             raise ValueError(f'point {k} is not finite')
-        if np.any(q < lower - 1e-9) or np.any(q > upper + 1e-9):
+        if np.any(positions[k] < lower - 1e-9) or np.any(positions[k] > upper + 1e-9):
             raise ValueError(f'point {k} is outside the joint limits')
-        t = to_seconds(point.time_from_start)
-        if t <= times[-1] and not (k == 0 and t == 0.0):
-            raise ValueError('time_from_start must increase')
-        points.append(q)
-        times.append(max(t, 1e-3) if k == 0 else t)
-    return TimedPath(np.array(points), np.array(times))
+        for name, values in fields.items():
+            given = getattr(point, name)
+            if len(given) == 0:
+                continue
+            if len(given) != len(msg.joint_names):
+                raise ValueError(f'point {k} has {len(given)} {name} for '
+                                 f'{len(msg.joint_names)} joints')
+            values[k] = np.asarray(given, dtype=float)[order]
+            if not np.all(np.isfinite(values[k])):
+                raise ValueError(f'point {k} has non-finite {name}')
+        times[k] = to_seconds(point.time_from_start)
+    stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+    return TrajectoryCommand(times, positions, fields['velocities'],
+                             fields['accelerations'], stamp)

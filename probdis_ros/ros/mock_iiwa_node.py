@@ -12,32 +12,48 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
+
 """
 mock_iiwa_node: a simulated LBR iiwa for tests and demos, with hidden obstacles.
 
-It publishes joint states of ``lbr_A1``..``lbr_A7`` at ``rate`` Hz and follows
-JointTrajectory commands the way joint_trajectory_controller does: a new message replaces
-the current trajectory, which starts from the current state and is interpolated linearly;
-joint speeds are capped at the URDF velocity limits.  The end-effector stops compliantly at
-its first contact with the hidden obstacles of a scenario file (the same contact code as the
-offline simulator) and stays there until a command moves it away.  Optional joint-state
-noise and latency exercise the planner's detector.
+It stands where the lbr stack's driver and joint_trajectory_controller stand: commands on
+the JTC topic go through JTC's own interpolation rules (:mod:`probdis_ros.motion.jtc`), the
+driver's command filter and an arm (:mod:`probdis_ros.physics.simulated_robot`), and joint
+states (positions, velocities, efforts) come out at the controller rate.  ``engine``
+chooses the arm:
+
+* ``physics`` (default): MuJoCo in joint impedance with a scene of rigid and yielding
+  clutter (``scene``: a file, or a name in config/scenes/);
+* ``kinematic``: the idealised arm of the first mock (``scenario``: config/scenarios/),
+  which copies the command and stops dead at the first contact of the flange point.
+
+With ``sim_time`` the mock runs on simulated time: it publishes ``/clock`` and runs
+``real_time_factor`` times faster than the wall clock (0: as fast as it can), so a planner
+started with ``use_sim_time:=true`` can be tested many times faster than real time.
+Optional faults: joint-state noise, latency, the "echo" of a driver in open loop, and a
+load-model error of the physics arm.
 """
 
 from __future__ import annotations
 
-from collections import deque
 import sys
+import time
 
+from builtin_interfaces.msg import Time
 import numpy as np
 from probdis_ros.model import iiwa_arm
-from probdis_ros.resources import scenario_path
-from probdis_ros.ros.messages import timed_path_from_msg
+from probdis_ros.physics.simulated_robot import (
+    build_robot,
+    ENGINES,
+    JointStateSample,
+    RobotSettings,
+)
+from probdis_ros.ros.messages import command_from_msg
 from probdis_ros.ros.node_main import run_node
-from probdis_ros.sim.worlds import load_world
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
+from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 
@@ -46,87 +62,103 @@ JOINTS = [f'lbr_A{i}' for i in range(1, 8)]
 
 def _describe(text: str, low: float | None = None, high: float | None = None
               ) -> ParameterDescriptor:
-    descriptor = ParameterDescriptor(description=text)
+    descriptor = ParameterDescriptor(description=text, read_only=True)
     if low is not None:
         descriptor.floating_point_range = [FloatingPointRange(from_value=low, to_value=high)]
     return descriptor
 
 
 class MockIiwa(Node):
-    """The simulated arm."""
+    """The simulated arm: a thin adapter around :class:`SimulatedRobot`."""
 
     def __init__(self, **kwargs) -> None:
         super().__init__('mock_iiwa', **kwargs)
         p = self.declare_parameter
-        p('scenario', 'demo_iiwa', _describe('scenario file, or name in config/scenarios/'))
-        p('rate', 100.0, _describe('joint-state rate [Hz]', 1.0, 2000.0))
+        p('engine', 'physics', _describe('physics (MuJoCo, joint impedance) | kinematic'))
+        p('scene', 'demo_hook', _describe('physics scene file, or name in config/scenes/'))
+        p('scenario', 'demo_iiwa', _describe('kinematic scenario file, or name in '
+                                             'config/scenarios/'))
+        p('rate', 100.0, _describe('controller and joint-state rate [Hz]', 10.0, 2000.0))
         p('noise', 0.0, _describe('std. dev. of joint-state noise [rad]', 0.0, 0.1))
         p('latency', 0.0, _describe('delay of published joint states [s]', 0.0, 1.0))
-        p('seed', 0)
-        p('joint_states_topic', '/lbr/joint_states')
-        p('trajectory_topic', '/lbr/joint_trajectory_controller/joint_trajectory')
+        p('echo', False, _describe('report the commanded position (a driver in open loop)'))
+        p('object_mass_error', 0.0, _describe('real minus assumed object mass [kg]',
+                                              -5.0, 5.0))
+        p('sim_time', False, _describe('run on simulated time and publish /clock'))
+        p('real_time_factor', 0.0, _describe('with sim_time: speed over the wall clock; '
+                                             '0: as fast as possible', 0.0, 1000.0))
+        p('seed', 0, ParameterDescriptor(description='noise stream', read_only=True))
+        p('joint_states_topic', '/lbr/joint_states', _describe('sensor_msgs/JointState out'))
+        p('trajectory_topic', '/lbr/joint_trajectory_controller/joint_trajectory',
+          _describe('trajectory_msgs/JointTrajectory in'))
+        value = lambda name: self.get_parameter(name).value   # noqa: E731
+        if value('engine') not in ENGINES:
+            raise ValueError(f'engine must be one of {", ".join(ENGINES)}, '
+                             f'got {value("engine")!r}')
         self.arm = iiwa_arm()
-        self.world = load_world(scenario_path(self.get_parameter('scenario').value))
-        if self.world.setting == '2d':
-            raise ValueError('the mock iiwa needs a 3d or 3d-orient scenario')
-        self.sim = self.world.compliant_arm()
-        self.q = self.world.start.copy()
-        self.sim.execute(np.array([self.q, self.q]))   # load the compiled FK now, not mid-run
-        self.path = None
-        self.path_start = 0.0
-        self.blocked = False
-        self.rng = np.random.default_rng(self.get_parameter('seed').value)
-        self.outbox: deque[tuple[float, JointState]] = deque()
-        self.pub = self.create_publisher(JointState, self.get_parameter(
-            'joint_states_topic').value, qos_profile_sensor_data)
-        self.create_subscription(JointTrajectory, self.get_parameter('trajectory_topic').value,
+        settings = RobotSettings(period=1.0 / value('rate'), noise=value('noise'),
+                                 latency=value('latency'), echo=value('echo'),
+                                 seed=value('seed'))
+        world = value('scene') if value('engine') == 'physics' else value('scenario')
+        self.robot, self.description = build_robot(
+            value('engine'), world, settings, object_mass_error=value('object_mass_error'))
+        self.sim_time = bool(value('sim_time'))
+        self.factor = float(value('real_time_factor'))
+        # simulated time starts at the wall clock, so stamps and bags read as real dates
+        self.epoch = time.time()
+        self.wall_start = time.monotonic()
+        self.pub = self.create_publisher(JointState, value('joint_states_topic'),
+                                         qos_profile_sensor_data)
+        self.clock_pub = self.create_publisher(Clock, '/clock', 10) if self.sim_time else None
+        self.create_subscription(JointTrajectory, value('trajectory_topic'),
                                  self._on_trajectory, 10)
-        self.dt = 1.0 / self.get_parameter('rate').value
-        self.last_step = self._now()
-        self.create_timer(self.dt, self._step)
-        self.get_logger().info(f'mock iiwa: scenario {self.world.name or "?"} with '
-                               f'{len(self.world.obstacles)} hidden obstacles')
+        self.period = settings.period
+        self.create_timer(self.period if not self.sim_time else 0.0005, self._tick)
+        self.get_logger().info(f'mock iiwa ({value("engine")}): {self.description}' +
+                               (' on simulated time' if self.sim_time else ''))
 
-    def _now(self) -> float:
-        return self.get_clock().now().nanoseconds * 1e-9
+    @property
+    def q(self) -> np.ndarray:
+        """Return where the simulated arm is (the truth, not the reported state)."""
+        return self.robot.engine.q
 
     def _on_trajectory(self, msg: JointTrajectory) -> None:
         try:
-            path = timed_path_from_msg(msg, JOINTS, self.q, self.arm.lower, self.arm.upper)
+            command = command_from_msg(msg, JOINTS, self.arm.lower, self.arm.upper)
         except ValueError as err:
             self.get_logger().error(f'trajectory refused: {err}')
             return
-        self.path, self.path_start = path, self._now()
+        self.robot.command(command)
 
-    def _step(self) -> None:
-        now = self._now()
-        elapsed, self.last_step = max(0.0, now - self.last_step), now
-        if self.path is not None:
-            target = self.path.at(now - self.path_start)
-            reach = self.arm.velocity_limits * elapsed     # a late tick may move further
-            step = np.clip(target - self.q, -reach, reach)
-            if np.any(step != 0):
-                run = self.sim.execute(np.array([self.q, self.q + step]))
-                self.q = run.config
-                if run.blocked:
-                    self.path = None
-            if self.path is not None and now - self.path_start > self.path.duration and \
-                    np.allclose(self.q, self.path.points[-1]):
-                self.path = None
-        self._publish(now)
+    def _steps_due(self) -> int:
+        """Return how many controller periods to run now (a late tick catches up)."""
+        if self.sim_time and self.factor == 0.0:
+            return 1
+        speed = self.factor if self.sim_time else 1.0
+        due = (time.monotonic() - self.wall_start) * speed - self.robot.time
+        return int(np.clip(np.floor(due / self.period + 1e-9), 0, 10))
 
-    def _publish(self, now: float) -> None:
+    def _tick(self) -> None:
+        steps = self._steps_due()
+        for _ in range(steps):
+            self.robot.step()
+        if steps:
+            self._publish(self.robot.joint_state())
+
+    def _stamp(self, seconds: float) -> Time:
+        nanoseconds = round((self.epoch + seconds) * 1e9)
+        return Time(sec=nanoseconds // 1_000_000_000, nanosec=nanoseconds % 1_000_000_000)
+
+    def _publish(self, state: JointStateSample) -> None:
+        if self.clock_pub is not None:
+            self.clock_pub.publish(Clock(clock=self._stamp(self.robot.time)))
         msg = JointState()
+        msg.header.stamp = self._stamp(state.time)
         msg.name = list(JOINTS)
-        noise = self.get_parameter('noise').value
-        q = self.q + (self.rng.normal(scale=noise, size=7) if noise > 0 else 0.0)
-        msg.position = [float(v) for v in q]
-        latency = self.get_parameter('latency').value
-        self.outbox.append((now + latency, msg))
-        while self.outbox and self.outbox[0][0] <= now:
-            out = self.outbox.popleft()[1]
-            out.header.stamp = self.get_clock().now().to_msg()
-            self.pub.publish(out)
+        msg.position = state.position.tolist()
+        msg.velocity = state.velocity.tolist()
+        msg.effort = state.effort.tolist()
+        self.pub.publish(msg)
 
 
 def main(args: list[str] | None = None) -> int:

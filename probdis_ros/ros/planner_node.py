@@ -40,7 +40,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 import numpy as np
 from probdis_ros.model import FailureMap, FailureMapError, iiwa_arm
 from probdis_ros.model.failure_map import write_document
-from probdis_ros.planning import Disentangler, make_planner, METHODS, RRTSettings, State
+from probdis_ros.planning import Disentangler, Method, METHODS, RRTSettings, State
 from probdis_ros.ros.markers import markers_msg
 from probdis_ros.ros.messages import BadJointStateError, hold_msg, joint_positions, trajectory_msg
 from probdis_ros.ros.monitor import BlockDetector, DetectorSettings, Verdict
@@ -134,6 +134,7 @@ class PlannerNode(Node):
         for name, (default, descriptor) in PARAMETERS.items():
             self.declare_parameter(name, default, descriptor)
         self.add_on_set_parameters_callback(self._check_parameters)
+        self.use_sim_time = bool(self.get_parameter('use_sim_time').value)
         self.arm = iiwa_arm(with_orientation=bool(self.get_parameter('orientation').value))
         self.joint_names = list(self.get_parameter('joint_names').value)
         problem = self._goal_problem(self.get_parameter('goal').value)
@@ -259,6 +260,18 @@ class PlannerNode(Node):
     def _now(self) -> float:
         return self.get_clock().now().nanoseconds * 1e-9
 
+    def _receive_time(self, info: dict) -> float:
+        """
+        Return when a message arrived [s], on the time base of the detector and the bag.
+
+        On wall-clock time the DDS receive time (independent of how busy the executor is);
+        with use_sim_time the node's clock, which the simulation's /clock drives.
+        """
+        received = info.get('received_timestamp')
+        if received and not self.use_sim_time:
+            return received * 1e-9
+        return self._now()
+
     def _on_start(self, request, response):
         response.success, response.message = self._start()
         self.get_logger().info(f'start: {response.message}')
@@ -267,6 +280,8 @@ class PlannerNode(Node):
     def _start(self) -> tuple[bool, str]:
         if self.active:
             return False, 'a run is already active; call ~/stop first'
+        if self.use_sim_time and self.get_clock().now().nanoseconds == 0:
+            return False, 'use_sim_time is set but no /clock has arrived; is the simulation on?'
         age = self._now() - self.measured_at
         if self.measured is None or age > self.get_parameter('state_timeout').value:
             return False, 'no fresh joint state has arrived; is the arm (driver) running?'
@@ -312,8 +327,7 @@ class PlannerNode(Node):
     def _record(self, topic: str, data: bytes, info: dict) -> None:
         """Store a message stamped with its DDS receive time, the detector's time base."""
         if self.recorder is not None:
-            stamp = info.get('received_timestamp') or self.get_clock().now().nanoseconds
-            self.recorder.write(topic, stamp, data)
+            self.recorder.write(topic, round(self._receive_time(info) * 1e9), data)
 
     def _close_bag(self) -> None:
         if self.recorder is not None:
@@ -331,11 +345,11 @@ class PlannerNode(Node):
             iterations=self.get_parameter('iterations').value,
             delta=self.get_parameter('delta').value,
             n_random=self.get_parameter('n_random').value,
-            p_goal=self.get_parameter('p_goal').value, step=self.get_parameter('step').value,
-            length_weight=self.get_parameter('length_weight').value)
-        return make_planner(self.get_parameter('method').value, self.arm, settings,
-                            self.get_parameter('threshold').value,
-                            self.get_parameter('epsilon').value)
+            p_goal=self.get_parameter('p_goal').value, step=self.get_parameter('step').value)
+        method = Method.from_parameters(self.get_parameter('method').value,
+                                        self.get_parameter('threshold').value,
+                                        self.get_parameter('epsilon').value)
+        return method.planner(self.arm, settings, self.get_parameter('length_weight').value)
 
     def _on_stop(self, request, response):
         if not self.active:
@@ -443,8 +457,7 @@ class PlannerNode(Node):
             return
         # the DDS receive time: independent of how busy the executor is, and the stamp the
         # recorder gives the same message, so replay sees exactly these times
-        received = info.get('received_timestamp')
-        now = received * 1e-9 if received else self._now()
+        now = self._receive_time(info)
         self.measured, self.measured_at = q, now
         if self.hold_on_next_state:
             self._hold()

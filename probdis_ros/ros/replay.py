@@ -35,9 +35,15 @@ from pathlib import Path
 
 import numpy as np
 from probdis_ros.model import FailureMap, iiwa_arm
+from probdis_ros.motion.jtc import JtcTrajectory
 from probdis_ros.planning.disentangle import failure_from_block
 from probdis_ros.ros.bag_source import Bag, BagError
-from probdis_ros.ros.messages import BadJointStateError, joint_positions, timed_path_from_msg
+from probdis_ros.ros.messages import (
+    BadJointStateError,
+    command_from_msg,
+    joint_positions,
+    joint_velocities,
+)
 from probdis_ros.ros.monitor import BlockDetector, DetectorSettings, Verdict
 from probdis_ros.ros.trajectory import nearest_segment
 
@@ -139,6 +145,7 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
          names: list[str], arm, settings: DetectorSettings, result: ReplayResult,
          t0: float) -> None:
     measured = None
+    measured_velocity = None
     detector = None
     kind = ''
     after_block = False
@@ -157,10 +164,11 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
                 result.problems.append(f'{t:.3f} s: command before any joint state, skipped')
                 continue
             try:
-                timed = timed_path_from_msg(msg, names, measured, arm.lower, arm.upper)
+                command = command_from_msg(msg, names, arm.lower, arm.upper)
             except ValueError as err:
                 result.problems.append(f'{t:.3f} s: command refused: {err}')
                 continue
+            timed = JtcTrajectory(command, measured, measured_velocity, t)
             if len(timed.points) == 2 and np.abs(timed.points[1] - measured).sum() <= \
                     settings.d_dist:
                 detector, kind = None, 'hold'
@@ -179,7 +187,7 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
         except BadJointStateError as err:
             result.problems.append(f'{t:.3f} s: joint state refused: {err}')
             continue
-        measured = q
+        measured, measured_velocity = q, joint_velocities(msg, names)
         result.times.append(t)
         result.configs.append(q)
         if detector is None:

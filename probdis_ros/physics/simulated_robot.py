@@ -1,0 +1,221 @@
+# Copyright 2026 probdis_ros contributors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+
+"""
+The arm as the planner meets it: JTC, the driver's filter, an arm, and what the driver reports.
+
+:class:`SimulatedRobot` runs the real stack's command path at the controller rate (100 Hz):
+joint_trajectory_controller (:mod:`probdis_ros.motion.jtc`) samples the newest command one
+period ahead, the lbr stack driver smooths it with its first-order filter, and an *engine*
+moves the arm toward it for one period:
+
+* :class:`~probdis_ros.physics.arm.PhysicsIiwa`: MuJoCo in joint impedance (the default of
+  the mock): lags, swings around a contact, presses with a force set by its stiffness;
+* :class:`KinematicEngine`: the idealised arm of the first mock and the offline simulator:
+  copies the command within the velocity limits and stops dead at the first contact of the
+  flange point with a scenario's hidden obstacles.
+
+What the driver reports (:meth:`SimulatedRobot.joint_state`) can carry the faults a real
+setup shows: Gaussian noise, a latency, and the "echo" of a driver with ``open_loop`` in
+effect, whose joint states are the commanded position instead of the measured one.
+No rclpy: the mock node and ``probdis sim --engine physics`` both drive this class.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass, replace
+from typing import Protocol
+
+import numpy as np
+from probdis_ros.model.arms import Arm
+from probdis_ros.motion.jtc import (
+    CONTROLLER_RATE,
+    FirstOrderFilter,
+    TrajectoryCommand,
+    TrajectoryController,
+)
+from probdis_ros.sim.compliant_arm import CompliantArm
+
+
+class Engine(Protocol):
+    """What moves the arm: the physics or the kinematic stand-in."""
+
+    time: float
+    q: np.ndarray
+    qdot: np.ndarray
+
+    def reset(self, q: np.ndarray) -> None:
+        """Place the arm at rest at q."""
+
+    def advance(self, setpoint: np.ndarray, duration: float) -> None:
+        """Move toward setpoint for duration seconds of simulated time."""
+
+
+class KinematicEngine:
+    """
+    The idealised arm: follows the setpoint within the velocity limits, stops at contact.
+
+    On contact with a hidden obstacle the flange stops just before it and stays until a
+    setpoint leads away (the compliant arm of the offline simulator).
+    """
+
+    def __init__(self, arm: Arm, compliant: CompliantArm) -> None:
+        self.arm = arm
+        self.compliant = compliant
+        self.time = 0.0
+        self.q = np.zeros(arm.n_joints)
+        self.qdot = np.zeros(arm.n_joints)
+        self.tau_measured = np.zeros(arm.n_joints)
+
+    def reset(self, q: np.ndarray) -> None:
+        """Place the arm at q (and load the compiled FK now, not mid-run)."""
+        self.q = np.asarray(q, dtype=float).copy()
+        self.qdot[:] = 0.0
+        self.compliant.execute(np.array([self.q, self.q]))
+
+    def advance(self, setpoint: np.ndarray, duration: float) -> None:
+        """Step toward setpoint, at most the velocity limits allow in duration."""
+        reach = self.arm.velocity_limits * duration
+        step = np.clip(np.asarray(setpoint, dtype=float) - self.q, -reach, reach)
+        before = self.q
+        if np.any(step != 0):
+            self.q = self.compliant.execute(np.array([self.q, self.q + step])).config
+        self.qdot = (self.q - before) / duration if duration > 0 else 0.0 * self.q
+        self.time += duration
+
+
+@dataclass
+class RobotSettings:
+    """The command path and what the driver reports; every default in one place."""
+
+    period: float = 1.0 / CONTROLLER_RATE   # JTC and driver cycle [s]
+    filter_tau: float = 0.04                # the driver's command filter [s]; 0: none
+    noise: float = 0.0                      # std. dev. of reported positions [rad]
+    latency: float = 0.0                    # reported joint states are this old [s]
+    echo: bool = False                      # report the command, not the arm (open_loop)
+    seed: int = 0                           # noise stream
+
+    def __post_init__(self) -> None:
+        """Refuse settings that cannot run."""
+        if not self.period > 0:
+            raise ValueError(f'period must be positive, got {self.period}')
+        for name in ('filter_tau', 'noise', 'latency'):
+            if not getattr(self, name) >= 0:
+                raise ValueError(f'{name} must be non-negative, got {getattr(self, name)}')
+
+
+@dataclass(frozen=True)
+class JointStateSample:
+    """One joint state as the driver reports it."""
+
+    time: float
+    position: np.ndarray
+    velocity: np.ndarray
+    effort: np.ndarray
+
+
+class SimulatedRobot:
+    """JTC -> driver filter -> engine, one controller period per :meth:`step`."""
+
+    def __init__(self, engine: Engine, start: np.ndarray,
+                 settings: RobotSettings | None = None) -> None:
+        self.engine = engine
+        self.settings = settings or RobotSettings()
+        self.controller = TrajectoryController(self.settings.period)
+        self.filter = FirstOrderFilter(self.settings.filter_tau, self.settings.period)
+        self.rng = np.random.default_rng(self.settings.seed)
+        engine.reset(start)
+        self.filter.reset(engine.q)
+        self.commanded = engine.q.copy()      # JTC's last position command
+        self._reported: deque[JointStateSample] = deque()
+        self._report()
+
+    @property
+    def time(self) -> float:
+        """Return the simulated time [s]."""
+        return self.engine.time
+
+    def command(self, command: TrajectoryCommand) -> None:
+        """Hand JTC a new trajectory message; it takes it at its next update."""
+        self.controller.receive(command)
+
+    def step(self) -> None:
+        """Run one controller period: JTC update, driver filter, the arm moves."""
+        state = self._state()       # JTC starts a new trajectory from the reported state
+        self.commanded = self.controller.update(self.engine.time, state.position,
+                                                state.velocity)
+        self.engine.advance(self.filter(self.commanded), self.settings.period)
+        self._report()
+
+    def _state(self) -> JointStateSample:
+        """Return what the driver's state interfaces hold now (no noise, no latency)."""
+        e = self.engine
+        if self.settings.echo:
+            return JointStateSample(e.time, self.commanded.copy(), np.zeros_like(e.q),
+                                    np.zeros_like(e.q))
+        effort = getattr(e, 'tau_measured', np.zeros_like(e.q))
+        return JointStateSample(e.time, e.q.copy(), e.qdot.copy(), np.asarray(effort).copy())
+
+    def _report(self) -> None:
+        state = self._state()
+        if self.settings.noise > 0:
+            noisy = state.position + self.rng.normal(scale=self.settings.noise,
+                                                     size=state.position.shape)
+            state = JointStateSample(state.time, noisy, state.velocity, state.effort)
+        self._reported.append(state)
+        horizon = self.engine.time - self.settings.latency
+        while len(self._reported) > 1 and self._reported[1].time <= horizon + 1e-12:
+            self._reported.popleft()
+
+    def joint_state(self) -> JointStateSample:
+        """Return the newest joint state the driver has reported (``latency`` old)."""
+        return self._reported[0]
+
+
+#: The arms a SimulatedRobot can drive.
+ENGINES = ('physics', 'kinematic')
+
+
+def build_robot(engine: str, world: str, settings: RobotSettings | None = None,
+                object_mass_error: float = 0.0) -> tuple[SimulatedRobot, str]:
+    """
+    Return a robot at the start of a world, and a line describing it.
+
+    world is a physics scene (file or name in config/scenes/) for ``physics``, a kinematic
+    scenario (file or name in config/scenarios/) for ``kinematic``.  The kinematic arm copies
+    the command as the first mock did, so it runs without the driver's filter.
+    """
+    settings = settings or RobotSettings()
+    if engine == 'kinematic':
+        from probdis_ros.model import iiwa_arm
+        from probdis_ros.resources import scenario_path
+        from probdis_ros.sim.worlds import load_world
+        scenario = load_world(scenario_path(world))
+        if scenario.setting == '2d':
+            raise ValueError(f'{world}: the iiwa needs a 3d or 3d-orient scenario')
+        kinematic = KinematicEngine(iiwa_arm(), scenario.compliant_arm())
+        robot = SimulatedRobot(kinematic, scenario.start,
+                               replace(settings, filter_tau=0.0))
+        return robot, (f'scenario {scenario.name or world} with {len(scenario.obstacles)} '
+                       f'hidden obstacles')
+    if engine == 'physics':
+        from probdis_ros.physics.arm import PhysicsIiwa, PhysicsSettings
+        from probdis_ros.physics.scene import load_scene
+        scene = load_scene(world)
+        physics = PhysicsIiwa(scene, PhysicsSettings(object_mass_error=object_mass_error))
+        robot = SimulatedRobot(physics, scene.start, settings)
+        return robot, f'scene {scene.name} with {len(scene.obstacles)} hidden obstacles'
+    raise ValueError(f'engine must be one of {", ".join(ENGINES)}, got {engine!r}')
