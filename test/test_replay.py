@@ -25,11 +25,11 @@ import time
 from conftest import probdis_command
 import numpy as np
 from probdis_ros.model import iiwa_arm
+from probdis_ros.motion.timing import time_path
 from probdis_ros.resources import scenario_path
 from probdis_ros.ros.mock_iiwa_node import MockIiwa
 from probdis_ros.ros.planner_node import PlannerNode
 from probdis_ros.ros.replay import replay, ReplayError
-from probdis_ros.ros.trajectory import time_path
 from probdis_ros.sim.worlds import load_world
 import pytest
 import rclpy

@@ -25,7 +25,6 @@ from __future__ import annotations
 from builtin_interfaces.msg import Duration
 import numpy as np
 from probdis_ros.motion.jtc import TrajectoryCommand
-from probdis_ros.ros.trajectory import TimedPath
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
@@ -59,31 +58,19 @@ def to_seconds(d: Duration) -> float:
     return d.sec + d.nanosec * 1e-9
 
 
-def trajectory_msg(path: TimedPath, joint_names: list[str]) -> JointTrajectory:
-    """Build a JointTrajectory: every joint, increasing times, last point at rest."""
+def trajectory_msg(command: TrajectoryCommand, joint_names: list[str]) -> JointTrajectory:
+    """Build a JointTrajectory of every joint; fields a point lacks are left empty."""
     msg = JointTrajectory()
     msg.joint_names = list(joint_names)
-    for k, (point, t) in enumerate(zip(path.points, path.times)):
-        if k == 0:
-            continue          # the first via point is where the arm is now
+    for k, t in enumerate(command.times):
         p = JointTrajectoryPoint()
-        p.positions = [float(v) for v in point]
-        if k == len(path.points) - 1:
-            p.velocities = [0.0] * len(joint_names)
+        p.positions = [float(v) for v in command.positions[k]]
+        for name in ('velocities', 'accelerations'):
+            values = command.field(name, k)
+            if values is not None:
+                setattr(p, name, [float(v) for v in values])
         p.time_from_start = duration(float(t))
         msg.points.append(p)
-    return msg
-
-
-def hold_msg(config: np.ndarray, joint_names: list[str], after: float) -> JointTrajectory:
-    """Build a one-point trajectory that holds config, reached after seconds."""
-    msg = JointTrajectory()
-    msg.joint_names = list(joint_names)
-    p = JointTrajectoryPoint()
-    p.positions = [float(v) for v in config]
-    p.velocities = [0.0] * len(joint_names)
-    p.time_from_start = duration(after)
-    msg.points.append(p)
     return msg
 
 

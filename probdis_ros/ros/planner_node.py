@@ -17,7 +17,7 @@ planner_node: probabilistic disentangling over ROS 2 topics and services.
 
 A thin adapter: joint states in, JointTrajectory commands out, the disentangling loop
 (:class:`probdis_ros.planning.Disentangler`) and the blocked-motion detector
-(:mod:`probdis_ros.ros.monitor`) in between.  All node state lives in the executor thread;
+(:mod:`probdis_ros.motion.detector`) in between.  All node state lives in the executor thread;
 planning runs in a worker thread so that joint states keep being read and checked while a
 plan is computed, and its result is picked up by a timer.
 
@@ -40,13 +40,18 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 import numpy as np
 from probdis_ros.model import FailureMap, FailureMapError, iiwa_arm
 from probdis_ros.model.failure_map import write_document
-from probdis_ros.planning import Disentangler, Method, METHODS, RRTSettings, State
+from probdis_ros.motion.timing import hold_command
+from probdis_ros.planning import Disentangler, Method, METHODS, RRTSettings
 from probdis_ros.ros.markers import markers_msg
-from probdis_ros.ros.messages import BadJointStateError, hold_msg, joint_positions, trajectory_msg
-from probdis_ros.ros.monitor import BlockDetector, DetectorSettings, Verdict
+from probdis_ros.ros.messages import (
+    BadJointStateError,
+    joint_positions,
+    joint_velocities,
+    trajectory_msg,
+)
 from probdis_ros.ros.node_main import run_node
 from probdis_ros.ros.recorder import BagRecorder
-from probdis_ros.ros.trajectory import nearest_segment, time_path
+from probdis_ros.run import Learned, PlanFrom, Run, RunSettings, Send, StatusChanged
 from rcl_interfaces.msg import (
     FloatingPointRange,
     IntegerRange,
@@ -146,19 +151,8 @@ class PlannerNode(Node):
         self.planner = self._make_planner()   # loads the compiled kernels now, not at ~/start
         self.measured: np.ndarray | None = None
         self.measured_at = -np.inf
-        self.loop: Disentangler | None = None
-        self.detector: BlockDetector | None = None
-        self.phase = 'idle'   # idle | planning | executing | retreating | <finished state>
-        self.hold_on_next_state = False
-        self.outcome = ''
-        self.message = 'ready'
+        self.run: Run | None = None
         self.plan_future: Future | None = None
-        self.plan_started = 0.0
-        self.block_time: float | None = None
-        self.retreat_done_at: float | None = None
-        self.pending_path: np.ndarray | None = None
-        self.latencies: list[float] = []
-        self.last_plan_time = 0.0
         self.worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix='probdis_plan')
         self.io = ThreadPoolExecutor(max_workers=1, thread_name_prefix='probdis_io')
         self.traj_pub = self.create_publisher(
@@ -291,14 +285,20 @@ class PlannerNode(Node):
             return False, f'goal parameter {problem}'
         planner = self._make_planner()
         self.fmap.c_fail = float(self.get_parameter('c_fail').value)
-        self.loop = Disentangler(self.arm, planner, np.asarray(goal, dtype=float), self.fmap,
-                                 max_paths=self.get_parameter('max_paths').value,
-                                 seed=self.get_parameter('seed').value,
-                                 goal_tolerance=self.get_parameter('goal_tolerance').value,
-                                 min_retreat=self.get_parameter('min_retreat').value)
-        self.latencies, self.outcome = [], ''
+        loop = Disentangler(self.arm, planner, np.asarray(goal, dtype=float), self.fmap,
+                            max_paths=self.get_parameter('max_paths').value,
+                            seed=self.get_parameter('seed').value,
+                            goal_tolerance=self.get_parameter('goal_tolerance').value,
+                            min_retreat=self.get_parameter('min_retreat').value)
+        value = self.get_parameter
+        settings = RunSettings(velocity_scaling=value('velocity_scaling').value,
+                               d_dist=value('d_dist').value,
+                               stall_time=value('stall_time').value,
+                               state_timeout=value('state_timeout').value)
+        self.run = Run(self.arm, loop, settings, clock=self._now)
         self._open_bag()
-        self._plan_from(self.measured)
+        self.run.start(self.measured_at, self.measured)
+        self._act()
         return True, f'disentangling from {np.round(self.measured, 3).tolist()}'
 
     # -- recording -----------------------------------------------------------------------
@@ -353,10 +353,13 @@ class PlannerNode(Node):
 
     def _on_stop(self, request, response):
         if not self.active:
-            self._hold()
+            if self.measured is not None:
+                self.traj_pub.publish(trajectory_msg(hold_command(self.measured),
+                                                     self.joint_names))
             response.success, response.message = True, 'no run active; holding'
             return response
-        self._finish(State.STOPPED, 'stopped on request')
+        self.run.stop('stopped on request')
+        self._act()
         response.success, response.message = True, 'stopped; holding the measured position'
         return response
 
@@ -373,72 +376,57 @@ class PlannerNode(Node):
         response.success, response.message = True, f'cleared {count} failures'
         return response
 
-    # -- the run -----------------------------------------------------------------------
+    # -- the run: events into Run, its actions out ------------------------------------
 
     @property
     def active(self) -> bool:
         """Tell whether a disentangling run is in progress."""
-        return self.phase in ('planning', 'executing', 'retreating')
+        return self.run is not None and self.run.active
 
-    def _plan_from(self, current: np.ndarray) -> None:
-        """Plan the next path in the worker thread; _tick picks it up."""
-        self.phase = 'planning'
-        self.plan_started = time.perf_counter()
-        loop = self.loop
-        self.plan_future = self.worker.submit(loop.next_path, current.copy())
-        self._publish_status()
+    def _act(self) -> None:
+        """Carry out what the run asks for, in order."""
+        run = self.run
+        while run is not None and run.actions:
+            action = run.actions.pop(0)
+            if isinstance(action, Send):
+                self.traj_pub.publish(trajectory_msg(action.command, self.joint_names))
+                if action.path is not None:
+                    self._publish_markers(action.path)
+            elif isinstance(action, PlanFrom):
+                self.plan_future = self.worker.submit(run.loop.next_path, action.config)
+            elif isinstance(action, Learned):
+                self.failure_pub.publish(String(data=json.dumps(action.event)))
+                self._save_map()
+                self._publish_markers(None)
+                self.get_logger().info(run.message)
+            elif isinstance(action, StatusChanged):
+                if not run.active:
+                    self._ended()
+                self._publish_status()
+
+    def _ended(self) -> None:
+        """A run ended: log it once, close the bag a little later (last status, hold)."""
+        if self.recorder_close_at is None and self.recorder is not None:
+            self.get_logger().info(f'run ended: {self.run.outcome}: {self.run.message}')
+            self.recorder_close_at = self._now() + 0.5
 
     def _tick(self) -> None:
         now = self._now()
         if self.recorder_close_at is not None and now >= self.recorder_close_at:
             self._close_bag()
-        if self.active and now - self.measured_at > self.get_parameter('state_timeout').value:
-            self._finish(State.STOPPED, f'joint states stopped arriving: none for '
-                         f'{now - self.measured_at:.2f} s (state_timeout)')
+        if self.run is None:
             return
+        self.run.tick(now)
         if self.plan_future is not None and self.plan_future.done():
             future, self.plan_future = self.plan_future, None
             try:
                 path = future.result()
             except Exception as err:   # a planner bug must not leave the arm moving
                 self.get_logger().error(f'planning failed: {err!r}')
-                self._finish(State.STOPPED, f'planning failed: {err}')
-                return
-            self.last_plan_time = self.loop.plan_times[-1] if self.loop.plan_times else 0.0
-            if path is None:
-                self._finish(self.loop.state, 'no path found within max_paths')
-                return
-            self.pending_path = path
-        arm_ready = self.phase == 'planning' or (
-            self.phase == 'retreating' and self.retreat_done_at is not None)
-        if self.pending_path is not None and arm_ready:
-            path, self.pending_path = self.pending_path, None
-            self._execute(path)
-
-    def _execute(self, path: np.ndarray) -> None:
-        path = np.array(path, dtype=float)
-        path[0] = self.measured
-        if not self.arm.within_limits(path).all():
-            self._finish(State.STOPPED, 'planned path leaves the joint limits; not sent')
-            return
-        timed = time_path(path, self.arm.velocity_limits,
-                          self.get_parameter('velocity_scaling').value)
-        self.traj_pub.publish(trajectory_msg(timed, self.joint_names))
-        now = self._now()
-        if self.block_time is not None:
-            waited = (self.retreat_published - self.block_time) + max(
-                0.0, now - (self.retreat_done_at or now))
-            self.latencies.append(waited)
-            self.block_time = None
-        self.detector = BlockDetector(timed, now, self._detector_settings())
-        self.phase = 'executing'
-        self.retreat_done_at = None
-        self._publish_markers(path)
-        self._publish_status()
-
-    def _detector_settings(self) -> DetectorSettings:
-        return DetectorSettings(d_dist=self.get_parameter('d_dist').value,
-                                stall_time=self.get_parameter('stall_time').value)
+                self.run.plan_failed(err)
+            else:
+                self.run.on_plan(path)
+        self._act()
 
     def _on_joint_state(self, data: bytes, info: dict) -> None:
         self._record(self._record_topics[0][0], data, info)
@@ -452,102 +440,27 @@ class PlannerNode(Node):
         except BadJointStateError as err:
             self.get_logger().error(f'joint state refused: {err}',
                                     throttle_duration_sec=1.0)
-            if self.active:
-                self._finish(State.STOPPED, f'malformed joint state: {err}')
+            if self.run is not None:
+                self.run.bad_joint_state(str(err))
+                self._act()
             return
-        # the DDS receive time: independent of how busy the executor is, and the stamp the
-        # recorder gives the same message, so replay sees exactly these times
         now = self._receive_time(info)
         self.measured, self.measured_at = q, now
-        if self.hold_on_next_state:
-            self._hold()
-            self.hold_on_next_state = False
-        if self.detector is None or not self.active:
-            return
-        verdict = self.detector.update(now, q)
-        if verdict is Verdict.MOVING:
-            return
-        if self.phase == 'executing':
-            self.detector = None
-            if verdict is Verdict.DONE:
-                self.loop.report_completed(q)
-                if self.loop.state.finished:
-                    self._finish(self.loop.state, 'goal reached' if self.loop.state is
-                                 State.SUCCEEDED else 'max_paths reached')
-                else:
-                    self._plan_from(q)
-                return
-            self._on_blocked(q, now)
-        elif self.phase == 'retreating':
-            self.detector = None
-            self.retreat_done_at = now
-
-    def _on_blocked(self, q: np.ndarray, now: float) -> None:
-        path = self.loop.attempts[-1].path
-        segment = nearest_segment(path, q)
-        retreat = self.loop.report_blocked(q, segment)
-        x, v, qf = self.fmap.points[-1], self.fmap.directions[-1], self.fmap.orientations[-1]
-        self.failure_pub.publish(String(data=json.dumps(
-            {'t': now, 'x': x.tolist(), 'v': v.tolist(), 'q': qf.tolist(),
-             'segment': segment})))
-        self._save_map()
-        self.block_time = now
-        timed = time_path(retreat, self.arm.velocity_limits,
-                          self.get_parameter('velocity_scaling').value)
-        self.traj_pub.publish(trajectory_msg(timed, self.joint_names))
-        self.retreat_published = self._now()
-        self.detector = BlockDetector(timed, self.retreat_published, self._detector_settings())
-        self.phase = 'retreating'
-        self.retreat_done_at = None
-        self.get_logger().info(f'blocked on segment {segment}: failure {len(self.fmap)} '
-                               f'recorded, retreating and replanning')
-        # plan the next path from the retreat target while the arm moves back
-        self.loop.report_retreated(retreat[-1])
-        if self.loop.state.finished:
-            self._finish(self.loop.state, 'max_paths reached')
-            return
-        self.plan_started = time.perf_counter()
-        self.plan_future = self.worker.submit(self.loop.next_path, retreat[-1].copy())
-        self._publish_markers(None)
-        self._publish_status()
-
-    def _finish(self, state: State, message: str) -> None:
-        """End the run: a plan still in the worker is dropped, the arm holds unless at goal."""
-        if self.loop is not None and state is State.STOPPED:
-            self.loop.stop()
-        self.outcome = state.value
-        self.plan_future = None
-        self.pending_path = None
-        self.detector = None
-        self.message = message
-        self.phase = state.value
-        if state is not State.SUCCEEDED:
-            self._hold()
-            self.hold_on_next_state = True
-        self.get_logger().info(f'run ended: {self.outcome}: {message}')
-        self._publish_status()
-        self.recorder_close_at = self._now() + 0.5   # the last status and hold go in too
-
-    def _hold(self) -> None:
-        if self.measured is not None:
-            self.traj_pub.publish(hold_msg(self.measured, self.joint_names, 0.01))
+        if self.run is not None:
+            self.run.on_joint_state(now, q, joint_velocities(msg, self.joint_names))
+            self._act()
 
     # -- reporting ---------------------------------------------------------------------
 
     def status(self) -> dict:
         """Return the status document published on ~/status."""
-        loop = self.loop
-        return {
-            'state': self.phase,
-            'paths': loop.paths_tried if loop else 0,
-            'failures': len(self.fmap),
-            'last_plan_time_s': self.last_plan_time,
-            'last_replan_latency_s': self.latencies[-1] if self.latencies else None,
-            'replan_latencies_s': self.latencies,
-            'outcome': self.outcome,
-            'message': self.message,
-            'bag': self.bag_path,
-        }
+        if self.run is not None:
+            status = self.run.status()
+        else:
+            status = {'state': 'idle', 'paths': 0, 'last_plan_time_s': 0.0,
+                      'last_replan_latency_s': None, 'replan_latencies_s': [],
+                      'outcome': '', 'message': 'ready'}
+        return {**status, 'failures': len(self.fmap), 'bag': self.bag_path}
 
     def _publish_status(self) -> None:
         self.status_pub.publish(String(data=json.dumps(self.status())))

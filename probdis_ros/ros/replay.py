@@ -17,7 +17,7 @@
 
 Any rosbag2 bag (MCAP or sqlite3, metadata v8 or v9, written by probdis or by
 ``ros2 bag record`` on the real arm) with joint states and commanded trajectories: the same
-detector as the live planner (:class:`probdis_ros.ros.monitor.BlockDetector`) judges every
+detector as the live planner (:class:`probdis_ros.motion.detector.BlockDetector`) judges every
 command against the joint states that followed it, and every block becomes a failure, so the
 failure map is rebuilt exactly as the planner built it.  No rclpy: bags are read by
 :mod:`probdis_ros.ros.bag_source` (rosbags, and record by record for a damaged MCAP file).
@@ -35,7 +35,9 @@ from pathlib import Path
 
 import numpy as np
 from probdis_ros.model import FailureMap, iiwa_arm
+from probdis_ros.motion.detector import BlockDetector, DetectorSettings, Verdict
 from probdis_ros.motion.jtc import JtcTrajectory
+from probdis_ros.motion.timing import nearest_segment
 from probdis_ros.planning.disentangle import failure_from_block
 from probdis_ros.ros.bag_source import Bag, BagError
 from probdis_ros.ros.messages import (
@@ -44,8 +46,6 @@ from probdis_ros.ros.messages import (
     joint_positions,
     joint_velocities,
 )
-from probdis_ros.ros.monitor import BlockDetector, DetectorSettings, Verdict
-from probdis_ros.ros.trajectory import nearest_segment
 
 JOINT_STATES = '/lbr/joint_states'
 TRAJECTORY = '/lbr/joint_trajectory_controller/joint_trajectory'

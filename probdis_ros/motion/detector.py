@@ -34,7 +34,7 @@ from dataclasses import dataclass
 from enum import Enum
 
 import numpy as np
-from probdis_ros.ros.trajectory import TimedPath
+from probdis_ros.motion.timing import TimedPath
 
 
 class Verdict(str, Enum):

@@ -25,6 +25,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from probdis_ros.motion.jtc import TrajectoryCommand
 
 #: Shortest duration of any segment [s].
 MIN_SEGMENT_S = 0.05
@@ -52,6 +53,18 @@ class TimedPath:
         frac = (t - self.times[k]) / (self.times[k + 1] - self.times[k])
         return self.points[k] + frac * (self.points[k + 1] - self.points[k])
 
+    def command(self) -> TrajectoryCommand:
+        """
+        Return the command that makes JTC run this path from where the arm is.
+
+        The first via point is where the arm is (JTC starts from the measured state), so it
+        is not sent; the last point carries zero velocities: the arm ends at rest.
+        """
+        n = self.points.shape[1]
+        velocities = np.full((len(self.points) - 1, n), np.nan)
+        velocities[-1] = 0.0
+        return TrajectoryCommand(self.times[1:], self.points[1:], velocities)
+
     def segment_at(self, t: float) -> int:
         """Return the index of the segment being executed at time t."""
         k = int(np.searchsorted(self.times, t, side='right')) - 1
@@ -72,6 +85,12 @@ def time_path(points: np.ndarray, velocity_limits: np.ndarray, scaling: float) -
     durations = np.abs(np.diff(points, axis=0)) / speeds
     segment = np.maximum(durations.max(axis=1, initial=0.0), MIN_SEGMENT_S)
     return TimedPath(points, np.concatenate([[0.0], np.cumsum(segment)]))
+
+
+def hold_command(config: np.ndarray, after: float = 0.01) -> TrajectoryCommand:
+    """Return a command that holds config, reached after seconds, at rest."""
+    config = np.asarray(config, dtype=float)
+    return TrajectoryCommand(np.array([after]), config[None], np.zeros((1, len(config))))
 
 
 def nearest_segment(points: np.ndarray, config: np.ndarray) -> int:
