@@ -41,7 +41,7 @@ demo: venv
 	$(VENV)/bin/probdis demo
 
 lint: venv
-	$(PY) -m ruff check probdis_ros test setup.py
+	$(PY) -m ruff check probdis_ros test setup.py config/launch
 
 test: lint
 	$(PY) -m pytest test

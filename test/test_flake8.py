@@ -30,6 +30,6 @@ ROOT = Path(__file__).resolve().parent.parent
 @pytest.mark.flake8
 @pytest.mark.linter
 def test_flake8():
-    paths = [str(ROOT / name) for name in ('probdis_ros', 'test', 'setup.py')]
+    paths = [str(ROOT / name) for name in ('probdis_ros', 'test', 'setup.py', 'config/launch')]
     rc, errors = main_with_errors(argv=paths)
     assert rc == 0, f'Found {len(errors)} code style errors / warnings:\n' + '\n'.join(errors)

@@ -43,7 +43,8 @@ def test_package_xml_declares_every_dependency():
     run = {d.name for d in package.exec_depends}
     for key in ('rclpy', 'sensor_msgs', 'trajectory_msgs', 'std_msgs', 'std_srvs',
                 'visualization_msgs', 'diagnostic_msgs', 'python3-numpy', 'python3-pin-pip',
-                'python3-yourdfpy-pip', 'python3-rosbags-pip'):
+                'python3-yourdfpy-pip', 'python3-rosbags-pip', 'python3-mujoco-pip',
+                'rosgraph_msgs', 'launch_ros', 'robot_state_publisher', 'rviz2'):
         assert key in run, key
     tests = {d.name for d in package.test_depends}
     assert {'ament_copyright', 'ament_flake8', 'ament_pep257', 'python3-pytest'} <= tests
@@ -61,6 +62,9 @@ def test_colcon_build_installs_the_executable_and_the_share_files(tmp_path):
     share = install / 'probdis_ros' / 'share' / 'probdis_ros'
     assert (share / 'urdf' / 'iiwa14.urdf').exists()
     assert (share / 'config' / 'planner.yaml').exists()
+    assert (share / 'config' / 'scenes' / 'demo_hook.yaml').exists()
+    assert (share / 'config' / 'launch' / 'probdis_mock.launch.py').exists()
+    assert (share / 'config' / 'rviz' / 'probdis.rviz').exists()
     script = f'source {install}/setup.bash && {exe} --help >/dev/null && {exe} info --json'
     env = {k: v for k, v in os.environ.items() if k not in ('AMENT_PREFIX_PATH', 'PYTHONPATH')}
     run = subprocess.run(['bash', '-c', script], capture_output=True, text=True, timeout=120,

@@ -212,8 +212,7 @@ def build_robot(engine: str, world: str, settings: RobotSettings | None = None,
         return robot, (f'scenario {scenario.name or world} with {len(scenario.obstacles)} '
                        f'hidden obstacles')
     if engine == 'physics':
-        from probdis_ros.physics.arm import PhysicsIiwa, PhysicsSettings
-        from probdis_ros.physics.scene import load_scene
+        from probdis_ros.physics import load_scene, PhysicsIiwa, PhysicsSettings
         scene = load_scene(world)
         physics = PhysicsIiwa(scene, PhysicsSettings(object_mass_error=object_mass_error))
         robot = SimulatedRobot(physics, scene.start, settings)

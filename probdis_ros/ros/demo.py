@@ -32,9 +32,13 @@ import sys
 import tempfile
 import time
 
+import numpy as np
+from probdis_ros.physics import load_scene
 from probdis_ros.resources import data_file, scenario_path
 from probdis_ros.sim.worlds import load_world
 
+#: The scene of ``probdis demo`` and ``make demo``.
+DEFAULT_SCENE = 'demo_hook'
 FINISHED = ('succeeded', 'gave_up', 'stopped')
 RUNNING = ('planning', 'executing', 'retreating')
 
@@ -71,29 +75,51 @@ def _running(client) -> bool:
         return False
 
 
-def run_demo(scenario: str = 'demo_iiwa', timeout: float = 300.0, quiet: bool = False,
-             extra_planner_args: tuple[str, ...] = ()) -> dict:
-    """Run a disentangling against the mock iiwa; return the outcome summary."""
+def world_of(world: str, engine: str) -> tuple[Path, str, np.ndarray]:
+    """Return a world's file, name and goal: a physics scene, or a kinematic scenario."""
+    if engine == 'physics':
+        scene = load_scene(world)
+        return Path(scene.source or world), scene.name, scene.goal
+    path = scenario_path(world)
+    scenario = load_world(path)
+    return path, scenario.name or str(path), scenario.goal
+
+
+def run_demo(world: str = DEFAULT_SCENE, timeout: float = 300.0, quiet: bool = False,
+             extra_planner_args: tuple[str, ...] = (), engine: str = 'physics',
+             sim_time: bool = False, real_time_factor: float = 0.0,
+             extra_mock_args: tuple[str, ...] = ()) -> dict:
+    """
+    Run a disentangling against the mock iiwa; return the outcome summary.
+
+    world is a physics scene (engine ``physics``) or a kinematic scenario (``kinematic``).
+    With sim_time the mock runs on simulated time at real_time_factor (0: as fast as it
+    can) and the planner follows its /clock; timeout stays in wall-clock seconds.
+    """
     from probdis_ros.ros.client import PlannerClient
 
-    path = scenario_path(scenario)
-    world = load_world(path)
+    path, name, goal_config = world_of(world, engine)
     env = ros_environment()
     os.environ.update({k: env[k] for k in ('ROS_AUTOMATIC_DISCOVERY_RANGE', 'ROS_DOMAIN_ID')})
     say = (lambda *a: None) if quiet else (lambda *a: print(*a, file=sys.stderr, flush=True))
     with tempfile.TemporaryDirectory(prefix='probdis_demo_') as tmp:
-        goal = '[' + ', '.join(f'{v:.9f}' for v in world.goal) + ']'
-        mock = subprocess.Popen(
-            node_command('probdis_ros.ros.mock_iiwa_node', '-p', f'scenario:={path}'), env=env)
+        goal = '[' + ', '.join(f'{v:.9f}' for v in goal_config) + ']'
+        world_param = 'scene' if engine == 'physics' else 'scenario'
+        clock = ('-p', 'sim_time:=true', '-p', f'real_time_factor:={real_time_factor}') \
+            if sim_time else ()
+        mock = subprocess.Popen(node_command(
+            'probdis_ros.ros.mock_iiwa_node', '-p', f'engine:={engine}',
+            '-p', f'{world_param}:={path}', *clock, *extra_mock_args), env=env)
         params = str(data_file('config', 'planner.yaml'))
         planner = subprocess.Popen(node_command(
             'probdis_ros.ros.planner_node', '--params-file', params, '-p', f'goal:={goal}',
-            '-p', f'map_file:={Path(tmp) / "map.json"}', *extra_planner_args), env=env)
+            '-p', f'map_file:={Path(tmp) / "map.json"}',
+            *(('-p', 'use_sim_time:=true') if sim_time else ()), *extra_planner_args), env=env)
         t0 = time.monotonic()
         status: dict = {}
         try:
             with PlannerClient() as client:
-                say(f'demo: {world.name or path}: mock iiwa and planner started '
+                say(f'demo: {name} ({engine}): mock iiwa and planner started '
                     f'(ROS_DOMAIN_ID={env["ROS_DOMAIN_ID"]})')
                 while True:
                     try:

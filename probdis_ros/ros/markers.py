@@ -69,3 +69,47 @@ def markers_msg(arm: Arm, fmap: FailureMap, path: np.ndarray | None, clock,
                         for p in prob]
         out.markers.append(cloud)
     return out
+
+
+def scene_markers(scene, stamp) -> MarkerArray:
+    """
+    Build markers of a physics scene: obstacles in the base frame, the object at the flange.
+
+    Obstacles are drawn where the scene file puts them (a yielding one is not followed as it
+    turns); the grasped object is locked to the flange frame, which robot_state_publisher
+    moves with the arm.
+    """
+    from probdis_ros.model.arms import rotation_to_quaternion
+    out = MarkerArray()
+    shapes = [(o.shape, FRAME, 'obstacles', (0.55, 0.55, 0.6) if o.hinge is None
+               else (0.85, 0.65, 0.2)) for o in scene.obstacles]
+    if scene.grasped is not None:
+        shapes += [(s, 'lbr_link_ee', 'grasped_object', (0.2, 0.7, 0.3))
+                   for s in scene.grasped.shapes]
+    for shape, frame, ns, (r, g, b) in shapes:
+        parts = [(shape.position, shape.rotation, shape.kind, shape.size)]
+        if shape.kind == 'capsule':     # RViz has no capsule: a cylinder and two balls
+            radius, length = shape.size
+            axis = shape.rotation[:, 2] * length / 2
+            parts = [(shape.position, shape.rotation, 'cylinder', shape.size),
+                     (shape.position + axis, shape.rotation, 'sphere', (radius,)),
+                     (shape.position - axis, shape.rotation, 'sphere', (radius,))]
+        for position, rotation, kind, size in parts:
+            marker = Marker(action=Marker.ADD, ns=ns, id=len(out.markers), frame_locked=True)
+            marker.type = {'box': Marker.CUBE, 'sphere': Marker.SPHERE,
+                           'cylinder': Marker.CYLINDER}[kind]
+            marker.header.frame_id, marker.header.stamp = frame, stamp
+            marker.pose.position = _point(position)
+            w, x, y, z = rotation_to_quaternion(np.asarray(rotation))
+            marker.pose.orientation.w, marker.pose.orientation.x = float(w), float(x)
+            marker.pose.orientation.y, marker.pose.orientation.z = float(y), float(z)
+            if kind == 'box':
+                marker.scale.x, marker.scale.y, marker.scale.z = (float(v) for v in size)
+            elif kind == 'sphere':
+                marker.scale.x = marker.scale.y = marker.scale.z = 2 * float(size[0])
+            else:
+                marker.scale.x = marker.scale.y = 2 * float(size[0])
+                marker.scale.z = float(size[1])
+            marker.color = ColorRGBA(r=r, g=g, b=b, a=0.8)
+            out.markers.append(marker)
+    return out

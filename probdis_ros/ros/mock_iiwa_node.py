@@ -48,14 +48,16 @@ from probdis_ros.physics.simulated_robot import (
     JointStateSample,
     RobotSettings,
 )
+from probdis_ros.ros.markers import scene_markers
 from probdis_ros.ros.messages import command_from_msg
 from probdis_ros.ros.node_main import run_node
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
 from rclpy.node import Node
-from rclpy.qos import qos_profile_sensor_data
+from rclpy.qos import DurabilityPolicy, qos_profile_sensor_data, QoSProfile
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
+from visualization_msgs.msg import MarkerArray
 
 JOINTS = [f'lbr_A{i}' for i in range(1, 8)]
 
@@ -112,6 +114,11 @@ class MockIiwa(Node):
         self.clock_pub = self.create_publisher(Clock, '/clock', 10) if self.sim_time else None
         self.create_subscription(JointTrajectory, value('trajectory_topic'),
                                  self._on_trajectory, 10)
+        scene = getattr(self.robot.engine, 'scene', None)
+        if scene is not None:         # for RViz: what the planner cannot see
+            latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+            self.scene_pub = self.create_publisher(MarkerArray, '~/scene', latched)
+            self.scene_pub.publish(scene_markers(scene, self._stamp(self.robot.time)))
         self.period = settings.period
         self.create_timer(self.period if not self.sim_time else 0.0005, self._tick)
         self.get_logger().info(f'mock iiwa ({value("engine")}): {self.description}' +

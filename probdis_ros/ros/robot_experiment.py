@@ -50,8 +50,15 @@ def planner_arguments(method: Method, seed: int, velocity_scaling: float) -> lis
 
 def run_robot_experiment(out: Path, scenarios: list[str], methods: list[Method], runs: int,
                          velocity_scaling: float = 1.0, timeout: float = 600.0,
-                         progress: Callable[[str], None] | None = None) -> list[dict]:
-    """Run what is missing of scenarios x methods x runs; return every record of DIR."""
+                         progress: Callable[[str], None] | None = None,
+                         engine: str = 'physics', sim_time: bool = True,
+                         real_time_factor: float = 0.0) -> list[dict]:
+    """
+    Run what is missing of scenarios x methods x runs; return every record of DIR.
+
+    scenarios are physics scenes (engine ``physics``) or kinematic scenarios; with sim_time
+    the mock runs on simulated time, as fast as the planner keeps up.
+    """
     from probdis_ros.ros.demo import run_demo
 
     out.mkdir(parents=True, exist_ok=True)
@@ -60,21 +67,26 @@ def run_robot_experiment(out: Path, scenarios: list[str], methods: list[Method],
     done = {(r['scenario'], r['method'], r['run']) for r in records}
     todo = [(s, m, r) for s in scenarios for m in methods for r in range(runs)
             if (s, str(m), r) not in done]
+    world_args = {'engine': engine, 'sim_time': sim_time,
+                  'real_time_factor': real_time_factor}
     with path.open('a') as stream:
         for number, (scenario, method, run) in enumerate(todo, start=1):
             t0 = time.monotonic()
             args = (*planner_arguments(method, run, velocity_scaling),
                     '-p', f'bag_dir:={out / "bags"}')
             try:
-                result = run_demo(scenario, timeout, quiet=True, extra_planner_args=args)
+                result = run_demo(scenario, timeout, quiet=True, extra_planner_args=args,
+                                  **world_args)
             except (RuntimeError, TimeoutError) as err:
                 # the nodes did not come up or answer (DDS, a busy machine): the run did not
                 # happen; try it once more, then stop (a rerun resumes here)
                 if progress:
                     progress(f'{scenario} {method} run {run}: {err}; trying again')
                 t0 = time.monotonic()
-                result = run_demo(scenario, timeout, quiet=True, extra_planner_args=args)
+                result = run_demo(scenario, timeout, quiet=True, extra_planner_args=args,
+                                  **world_args)
             record = {'scenario': scenario, 'method': str(method), 'run': run, 'seed': run,
+                      'engine': engine, 'velocity_scaling': velocity_scaling,
                       'success': result['success'], 'paths': result['paths'],
                       'failures': result['failures'], 'wall_s': time.monotonic() - t0,
                       'bag': result['bag']}

@@ -1,0 +1,123 @@
+# Copyright 2026 probdis_ros contributors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+
+"""
+One disentangling against the physics arm, without ROS, as fast as the machine allows.
+
+The same :class:`~probdis_ros.run.Run` as the planner node drives a
+:class:`~probdis_ros.physics.simulated_robot.SimulatedRobot` on simulated time: every
+controller period the run gets the reported joint state, and its commands go through JTC,
+the driver's filter and MuJoCo.  Planning is done in place (simulated time stands still
+while the planner thinks), so an episode measures the method and the arm, not this
+machine's speed.  ``probdis sim --engine physics`` and the robot-style sweeps use it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+import time
+
+import numpy as np
+from probdis_ros.model import iiwa_arm
+from probdis_ros.model.failure_map import FailureMap
+from probdis_ros.physics.simulated_robot import build_robot, RobotSettings
+from probdis_ros.planning import Disentangler, Method, RRTSettings, State
+from probdis_ros.run import Learned, PlanFrom, Run, RunSettings, Send
+
+
+@dataclass
+class PhysicsEpisode:
+    """What happened: the outcome, the arm's trace, the failures and the contacts."""
+
+    success: bool
+    outcome: str
+    paths: int
+    failures: list[dict]
+    times: np.ndarray               # simulated time of every controller period [s]
+    configs: np.ndarray             # the arm's true configuration then
+    gaps: np.ndarray                # the detector's L1 gap then (0 where nothing runs)
+    contact_force: np.ndarray       # summed normal force between arm/object and scene [N]
+    plan_times_s: list[float]
+    sim_time_s: float
+    wall_time_s: float
+    scene: object = None
+    loop: Disentangler | None = None
+    message: str = ''
+    commands: list = field(default_factory=list)
+
+    def summary(self) -> dict:
+        """Return the JSON summary printed by ``probdis sim --engine physics --json``."""
+        return {'success': self.success, 'outcome': self.outcome, 'paths': self.paths,
+                'failures': len(self.failures), 'message': self.message,
+                'sim_time_s': round(self.sim_time_s, 3),
+                'wall_time_s': round(self.wall_time_s, 3),
+                'real_time_factor': round(self.sim_time_s / max(self.wall_time_s, 1e-9), 1),
+                'peak_contact_force_n': round(float(self.contact_force.max(initial=0.0)), 1),
+                'plan_times_s': self.plan_times_s}
+
+
+def run_physics_episode(scene: str, method: str | Method = 'probabilistic', seed: int = 0,
+                        max_paths: int = 20, rrt: RRTSettings | None = None,
+                        run_settings: RunSettings | None = None,
+                        robot_settings: RobotSettings | None = None,
+                        time_limit: float = 600.0, goal_tolerance: float = 0.04,
+                        min_retreat: float = 0.1) -> PhysicsEpisode:
+    """Disentangle a physics scene from its start to its goal; reproducible from seed."""
+    wall = time.perf_counter()
+    method = Method.resolve(method) if isinstance(method, str) else method
+    robot, _ = build_robot('physics', scene, robot_settings)
+    scene_doc = robot.engine.scene
+    arm = iiwa_arm()
+    fmap = FailureMap(arm.task_space, method.map_c_fail())
+    loop = Disentangler(arm, method.planner(arm, rrt), scene_doc.goal, fmap,
+                        max_paths=max_paths, seed=seed, goal_tolerance=goal_tolerance,
+                        min_retreat=min_retreat)
+    run = Run(arm, loop, run_settings or RunSettings())
+    failures, commands = [], []
+    times, configs, gaps, forces = [], [], [], []
+
+    def act() -> None:
+        while run.actions:
+            action = run.actions.pop(0)
+            if isinstance(action, Send):
+                robot.command(action.command)
+                commands.append((robot.time, action.command))
+            elif isinstance(action, PlanFrom):
+                run.on_plan(loop.next_path(action.config))
+            elif isinstance(action, Learned):
+                failures.append(action.event)
+
+    state = robot.joint_state()
+    run.start(state.time, state.position)
+    act()
+    while run.active and robot.time < time_limit:
+        robot.step()
+        state = robot.joint_state()
+        run.on_joint_state(state.time, state.position, state.velocity)
+        run.tick(robot.time)
+        act()
+        times.append(robot.time)
+        configs.append(robot.engine.q.copy())
+        gaps.append(run.detector.gap if run.detector is not None else 0.0)
+        forces.append(sum(c.force for c in robot.engine.contacts()))
+    if run.active:
+        run.finish(State.STOPPED, f'time limit of {time_limit:.0f} s simulated reached')
+    return PhysicsEpisode(
+        success=run.phase.value == 'succeeded', outcome=run.phase.value,
+        paths=loop.paths_tried, failures=failures, times=np.array(times),
+        configs=np.array(configs).reshape(-1, arm.n_joints), gaps=np.array(gaps),
+        contact_force=np.array(forces), plan_times_s=loop.plan_times,
+        sim_time_s=robot.time, wall_time_s=time.perf_counter() - wall, scene=scene_doc,
+        loop=loop, message=run.message, commands=commands)
