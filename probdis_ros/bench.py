@@ -72,33 +72,27 @@ def nineteen_failure_map(seed: int = 0):
     from probdis_ros.model import FailureMap
     from probdis_ros.planning import Disentangler, EpsilonPlanner
     from probdis_ros.resources import scenario_path
+    from probdis_ros.sim.episode import drive
     from probdis_ros.sim.worlds import load_world
 
     world = load_world(scenario_path('demo_iiwa'))
     for loop_seed in range(seed, seed + 100):
-        sim = world.compliant_arm()
         loop = Disentangler(world.arm, EpsilonPlanner(world.arm, 0.2),
                             world.goal, FailureMap(world.arm.task_space), max_paths=200,
                             seed=loop_seed)
-        current = world.start
-        while len(loop.fmap) < 19:
-            path = loop.next_path(current)
-            if path is None:
-                break
-            run = sim.execute(path)
-            current = run.config
-            if run.blocked:
-                current = sim.execute(loop.report_blocked(current, run.segment)).config
-                loop.report_retreated(current)
-            else:
-                loop.report_completed(current)
+        current, _ = drive(loop, world.compliant_arm(), world.start,
+                           until=lambda loop: len(loop.fmap) >= 19)
         if len(loop.fmap) == 19:
             return current, world.goal, loop.fmap
     raise RuntimeError('no episode produced 19 failures')
 
 
 def bench_plan(seeds: int = 20) -> dict:
-    """Median ProbRRT planning time (paper parameters, iiwa with orientation, one thread)."""
+    """
+    Median ProbRRT planning time (paper parameters, iiwa with orientation, one thread).
+
+    Also the mean number of RRT* re-parentings per plan on each map.
+    """
     from probdis_ros.model import FailureMap
     from probdis_ros.planning import ProbRRT
 
@@ -107,12 +101,14 @@ def bench_plan(seeds: int = 20) -> dict:
     planner = ProbRRT(arm)
     planner.plan(start, goal, fmap, np.random.default_rng(0))   # compile the kernels
     result = {'machine': machine(), 'seeds': seeds}
-    for key, the_map in (('median_s_empty_map', FailureMap(arm.task_space)),
-                         ('median_s_19_failures', fmap)):
-        times = []
+    for key, the_map in (('empty_map', FailureMap(arm.task_space)),
+                         ('19_failures', fmap)):
+        times, rewires = [], []
         for seed in range(seeds):
             t0 = time.perf_counter()
-            planner.plan(start, goal, the_map, np.random.default_rng(seed))
+            plan = planner.plan(start, goal, the_map, np.random.default_rng(seed))
             times.append(time.perf_counter() - t0)
-        result[key] = statistics.median(times)
+            rewires.append(plan.rewires)
+        result[f'median_s_{key}'] = statistics.median(times)
+        result[f'rewires_per_plan_{key}'] = statistics.fmean(rewires)
     return result

@@ -103,13 +103,8 @@ def cmd_bench_fk(args: argparse.Namespace) -> int:
 
 def cmd_experiment_sweep(args: argparse.Namespace) -> int:
     """Run (or resume) a sweep of simulated episodes."""
-    from probdis_ros.experiments.sweep import (
-        episode_keys,
-        Method,
-        progress_line,
-        run_sweep,
-        SETTINGS,
-    )
+    from probdis_ros.experiments.sweep import episode_keys, progress_line, run_sweep, SETTINGS
+    from probdis_ros.planning.methods import Method
 
     settings = _split(args.setting)
     unknown = [s for s in settings if s not in SETTINGS]
@@ -146,7 +141,7 @@ def cmd_experiment_report(args: argparse.Namespace) -> int:
 
 def cmd_experiment_robot(args: argparse.Namespace) -> int:
     """Run the robot scenarios through the ROS nodes against the mock iiwa (Table I)."""
-    from probdis_ros.experiments.sweep import Method
+    from probdis_ros.planning.methods import Method
     from probdis_ros.resources import scenario_path
     from probdis_ros.ros.robot_experiment import robot_table, run_robot_experiment
 
@@ -192,11 +187,12 @@ def cmd_sim(args: argparse.Namespace) -> int:
     """Run one simulated disentangling episode."""
     import statistics
 
-    from probdis_ros.planning import RRTSettings
+    from probdis_ros.planning import Method
     from probdis_ros.resources import scenario_path
     from probdis_ros.sim.episode import run_episode
     from probdis_ros.sim.worlds import load_world, random_world
 
+    method = Method.resolve(args.method, args.threshold, args.epsilon)
     if args.scenario:
         world = load_world(scenario_path(args.scenario))
         if args.setting and args.setting != world.setting:
@@ -207,9 +203,8 @@ def cmd_sim(args: argparse.Namespace) -> int:
     if args.plot and world.setting != '2d':
         raise UsageError('--plot draws 2-D episodes; use --setting 2d')
     seed = args.seed or 0
-    result = run_episode(world, args.method, seed=seed, max_paths=args.max_paths,
-                         threshold=args.threshold, epsilon=args.epsilon,
-                         settings=RRTSettings(), c_fail=args.c_fail)
+    result = run_episode(world, method, seed=seed, max_paths=args.max_paths,
+                         c_fail=method.map_c_fail(args.c_fail))
     if args.plot:
         from probdis_ros.plots import plot_episode
 
@@ -219,8 +214,9 @@ def cmd_sim(args: argparse.Namespace) -> int:
         return 0
     outcome = 'disentangled' if result.success else 'NOT disentangled'
     times = result.plan_times_s
-    print(f'{world.name or args.scenario}: {args.method}: {outcome} after {result.paths} '
-          f'path(s), {result.failures} failure(s) learned')
+    empty = f' ({result.empty_plans} of them empty plans)' if result.empty_plans else ''
+    print(f'{world.name or args.scenario}: {method}: {outcome} after {result.paths} '
+          f'path(s){empty}, {result.failures} failure(s) learned')
     if times:
         print(f'planning time per path: median {statistics.median(times):.3f} s, '
               f'max {max(times):.3f} s')
@@ -228,6 +224,53 @@ def cmd_sim(args: argparse.Namespace) -> int:
         print(f'(world drawn after {world.rejected_draws} rejected unsolvable draws)')
     if args.plot:
         print(f'wrote {args.plot}')
+    return 0
+
+
+def cmd_plan(args: argparse.Namespace) -> int:
+    """Plan one path on a saved failure map and print it."""
+    import numpy as np
+    from probdis_ros.model import arm_for_setting, FailureMap
+    from probdis_ros.model.path_cost import path_success_probability
+    from probdis_ros.planning import Method, RRTSettings
+    from probdis_ros.planning.seeds import PLANNER, stream
+
+    fmap = FailureMap.load(args.map)
+    setting = {'point2': '2d', 'point3': '3d', 'pose3': '3d-orient'}[fmap.task_space.value]
+    arm = arm_for_setting(setting)
+    ends = []
+    for name in ('start', 'goal'):
+        config = np.array(getattr(args, name), dtype=float)
+        if len(config) != arm.n_joints:
+            raise UsageError(f'--{name} needs {arm.n_joints} joint values for a '
+                             f'{fmap.task_space.value} map, got {len(config)}')
+        ends.append(config)
+    if args.plan_time is not None and args.plan_time <= 0:
+        raise UsageError('--plan-time must be positive')
+    settings = RRTSettings(iterations=args.iterations, delta=args.delta,
+                           plan_time=args.plan_time or 0.0)
+    method = Method.parse(args.method)
+    if method.name == 'epsilon':
+        raise UsageError('epsilon does not plan on a map; use probabilistic or hard:Y')
+    planner = method.planner(arm, settings, args.length_weight)
+    plan = planner.plan(ends[0], ends[1], fmap, stream(args.seed, PLANNER))
+    if plan is None:
+        doc = {'path': None, 'cost': None, 'success_probability': 0.0, 'plan_time_s': None}
+    else:
+        success = path_success_probability(arm, fmap, plan.path, args.delta)
+        doc = {'path': plan.path.tolist(), 'cost': plan.cost, 'success_probability': success,
+               'plan_time_s': plan.plan_time_s}
+    if args.json:
+        _print_json(doc)
+        return 0 if plan is not None else 1
+    if plan is None:
+        print(f'{args.map}: {method}: no feasible path')
+        return 1
+    print(f'{args.map}: {len(fmap)} failures, {method}: {len(plan.path)} via points, cost '
+          f'{plan.cost:.4f}, success probability {doc["success_probability"]:.3f}, planned '
+          f'in {plan.plan_time_s:.3f} s')
+    for q in plan.path:
+        print(' '.join(f'{v: .5f}' for v in q))
     return 0
 
 
@@ -244,6 +287,8 @@ def cmd_bench_plan(args: argparse.Namespace) -> int:
               f'median of {args.seeds} seeds:')
         print(f'  empty map:    {result["median_s_empty_map"]:.3f} s')
         print(f'  19 failures:  {result["median_s_19_failures"]:.3f} s')
+        print(f'RRT* re-parentings per plan: {result["rewires_per_plan_empty_map"]:.1f} '
+              f'(empty map), {result["rewires_per_plan_19_failures"]:.1f} (19 failures)')
         print(f'machine: {result["machine"]}')
     return 0
 
@@ -307,7 +352,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
 def cmd_replay(args: argparse.Namespace) -> int:
     """Rerun the blocked-motion detector on a bag; rebuild the failure map."""
-    from probdis_ros.ros.monitor import DetectorSettings
+    from probdis_ros.motion.detector import DetectorSettings
     from probdis_ros.ros.replay import replay, ReplayError
 
     if args.publish:
@@ -407,23 +452,50 @@ def build_parser() -> argparse.ArgumentParser:
                        help='print {"median_s_empty_map": float, "median_s_19_failures": float}')
     bplan.set_defaults(handler=cmd_bench_plan)
 
+    from probdis_ros.model.path_cost import DEFAULT_DELTA, DEFAULT_LENGTH_WEIGHT
+
+    plan = sub.add_parser('plan', help='plan one path on a saved failure map')
+    plan.add_argument('--map', required=True, help='a failure map file (README format)')
+    plan.add_argument('--start', required=True, nargs='+', type=float, metavar='Q',
+                      help='start joint positions [rad]')
+    plan.add_argument('--goal', required=True, nargs='+', type=float, metavar='Q',
+                      help='goal joint positions [rad]')
+    budget = plan.add_mutually_exclusive_group()
+    budget.add_argument('--plan-time', type=float, metavar='S',
+                        help='anytime: keep improving the path for S seconds (rounds of K)')
+    budget.add_argument('--iterations', type=_positive_int, default=100,
+                        help='K, iterations per tree (default 100, the paper)')
+    plan.add_argument('--seed', type=int, default=0, help='seed of the planner')
+    plan.add_argument('--delta', type=float, default=DEFAULT_DELTA, help='Delta [rad]')
+    plan.add_argument('--length-weight', type=float, default=DEFAULT_LENGTH_WEIGHT,
+                      help='lambda: weight of joint-space length')
+    plan.add_argument('--method', default='probabilistic',
+                      help='probabilistic or hard:Y[:C_HARD]')
+    plan.add_argument('--json', action='store_true', help='print {"path", "cost", '
+                      '"success_probability", "plan_time_s"}')
+    plan.set_defaults(handler=cmd_plan)
+
     from probdis_ros.planning import DEFAULT_EPSILON, DEFAULT_THRESHOLD, METHODS
 
     sim = sub.add_parser('sim', help='one simulated disentangling episode')
     sim.add_argument('--setting', choices=SETTINGS, help='2d, 3d or 3d-orient (default 2d)')
     sim.add_argument('--obstacles', type=_positive_int, default=10,
                      help='hidden obstacles of a random world')
-    sim.add_argument('--method', choices=METHODS, default='probabilistic')
+    sim.add_argument('--method', default='probabilistic',
+                     help=f'{", ".join(METHODS)}, or a method string: probabilistic[:C_FAIL], '
+                     'hard:Y[:C_HARD], epsilon:X (default probabilistic)')
     sim.add_argument('--threshold', type=float, default=DEFAULT_THRESHOLD,
                      help='Y of the hard method')
     sim.add_argument('--epsilon', type=float, default=DEFAULT_EPSILON,
                      help='X of the epsilon method')
-    sim.add_argument('--seed', type=int, help='seed of the random world and the planner; with '
-                     '--scenario of the planner only (default 0)')
+    sim.add_argument('--seed', type=int, help='seed of the random world and the planner '
+                     '(independent streams of it); with --scenario of the planner only '
+                     '(default 0)')
     sim.add_argument('--scenario', help='a scenario YAML file, or the name of one in '
                      'config/scenarios/')
     sim.add_argument('--max-paths', type=_positive_int, default=20, help='N_ITER')
-    sim.add_argument('--c-fail', type=float, default=DEFAULT_C_FAIL, help='C_FAIL [1/m^2]')
+    sim.add_argument('--c-fail', type=float, default=DEFAULT_C_FAIL,
+                     help='C_FAIL of the failure map [1/m^2] (probabilistic:C overrides it)')
     sim.add_argument('--json', action='store_true', help='print one JSON object')
     sim.add_argument('--plot', metavar='OUT.png', help='draw the (2-D) episode')
     sim.set_defaults(handler=cmd_sim)
@@ -490,7 +562,7 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_argument('--obstacles', default='1,10,30,50', help='comma-separated counts')
     sweep.add_argument('--methods',
                        default='probabilistic,hard:0.01,hard:0.02,epsilon:0.2,epsilon:0.4',
-                       help='comma-separated probabilistic[:C_FAIL], hard:Y, epsilon:X')
+                       help='comma-separated probabilistic[:C_FAIL], hard:Y[:C_HARD], epsilon:X')
     sweep.add_argument('--worlds', type=int, default=100, help='worlds per obstacle count')
     sweep.add_argument('--max-paths', type=int, default=20, help='N_ITER of each episode')
     sweep.add_argument('--seed', type=int, default=0, help='seed of the sweep (its worlds)')
@@ -510,7 +582,7 @@ def build_parser() -> argparse.ArgumentParser:
     robot.add_argument('--scenarios', default='robot_waste,robot_maze,robot_bunny',
                        help='comma-separated scenario files or names')
     robot.add_argument('--methods', default='epsilon:0.2,hard:0.01,probabilistic',
-                       help='comma-separated probabilistic[:C_FAIL], hard:Y, epsilon:X')
+                       help='comma-separated probabilistic[:C_FAIL], hard:Y[:C_HARD], epsilon:X')
     robot.add_argument('--out', default='results/robot', help='directory of robot_runs.jsonl '
                        'and the bags; runs already there are skipped')
     robot.add_argument('--velocity-scaling', type=float, default=1.0,

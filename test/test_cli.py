@@ -83,7 +83,8 @@ def test_map_plot_refuses_bad_maps_clearly(probdis, tmp_path):
 def test_sim_json_prints_the_episode(probdis):
     result = probdis('sim', '--setting', '2d', '--obstacles', '10', '--seed', '4', '--json')
     doc = json.loads(result.stdout)
-    assert list(doc) == ['success', 'paths', 'failures', 'plan_times_s']
+    assert list(doc) == ['success', 'paths', 'failures', 'empty_plans', 'plan_times_s']
+    assert 0 <= doc['empty_plans'] <= doc['paths']
     assert isinstance(doc['success'], bool) and 1 <= doc['paths'] <= 20
     assert len(doc['plan_times_s']) == doc['paths']
     again = json.loads(probdis('sim', '--setting', '2d', '--obstacles', '10', '--seed', '4',
@@ -100,7 +101,7 @@ def test_sim_of_the_shipped_scenario_with_a_plot(probdis, tmp_path):
 
 
 def test_sim_baselines_and_bad_input(probdis, tmp_path):
-    for method in ('hard', 'epsilon'):
+    for method in ('hard', 'epsilon', 'hard:0.02:3000'):
         doc = json.loads(probdis('sim', '--method', method, '--seed', '1', '--max-paths', '3',
                                  '--json').stdout)
         assert doc['paths'] <= 3
@@ -114,9 +115,34 @@ def test_sim_baselines_and_bad_input(probdis, tmp_path):
     assert result.returncode == 2 and 'missing goal, obstacles' in result.stderr
     result = probdis('sim', '--setting', '3d', '--plot', str(tmp_path / 'x.png'), check=False)
     assert result.returncode == 2 and 'draws 2-D episodes' in result.stderr
+    result = probdis('sim', '--method', 'hard:2', check=False)
+    assert result.returncode == 2 and 'outside' in result.stderr
 
 
 def test_bench_plan_json_prints_both_medians(probdis):
     doc = json.loads(probdis('bench', 'plan', '--seeds', '2', '--json', timeout=300).stdout)
     assert list(doc) == ['median_s_empty_map', 'median_s_19_failures']
     assert all(isinstance(v, float) and v > 0 for v in doc.values())
+
+
+def test_plan_prints_a_path_on_a_saved_map(probdis, tmp_path):
+    from probdis_ros.model import FailureMap, TaskSpace
+
+    fmap = FailureMap(TaskSpace.POINT2, 100.0)
+    fmap.add([0.0, 0.7], [1.0, 0.0])
+    fmap.save(tmp_path / 'map.json')
+    start = ['2.17', '0', '0', '0', '0', '0', '0']
+    goal = ['0.97', '0', '0', '0', '0', '0', '0']
+    args = ('plan', '--map', str(tmp_path / 'map.json'), '--start', *start, '--goal', *goal,
+            '--iterations', '30', '--seed', '2', '--json')
+    doc = json.loads(probdis(*args).stdout)
+    assert list(doc) == ['path', 'cost', 'success_probability', 'plan_time_s']
+    assert doc['path'][0] == [float(v) for v in start]
+    assert doc['path'][-1] == [float(v) for v in goal]
+    assert 0 < doc['success_probability'] <= 1 and doc['cost'] > 0
+    assert json.loads(probdis(*args).stdout)['path'] == doc['path']      # seeded
+    result = probdis('plan', '--map', str(tmp_path / 'map.json'), '--start', '0', '--goal',
+                     *goal, check=False)
+    assert result.returncode == 2 and '--start needs 7 joint values' in result.stderr
+    result = probdis(*args[:-1], '--plan-time', '0.1', check=False)
+    assert result.returncode == 2 and 'not allowed with' in result.stderr

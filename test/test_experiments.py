@@ -88,6 +88,23 @@ def test_a_killed_sweep_resumes_to_the_same_episodes_without_duplicates(tmp_path
         (1, 'probabilistic'), (1, 'epsilon:0.2'), (10, 'probabilistic'), (10, 'epsilon:0.2')}
     for name in ('success.png', 'sensitivity.png', 'summary.json', 'summary.md'):
         assert (out / name).stat().st_size > 0
+    # every record counts its empty plans; Probabilistic and Epsilon always find a path
+    assert all(r['empty_plans'] == 0 for r in read_episodes(episodes))
+    assert all(c['empty_plan_share'] == 0.0 for c in summary['cells'])
+    assert 'empty plans / paths' in (out / 'summary.md').read_text()
+
+
+def test_the_report_shows_the_share_of_empty_plans():
+    def record(world, empty, paths, **extra):
+        return {'setting': '2d', 'obstacles': 1, 'method': 'hard:0.01', 'max_paths': 20,
+                'success': False, 'paths': paths, 'plan_times_s': [0.01] * paths,
+                'wall_s': 1.0, 'world': world, **({'empty_plans': empty} if empty is not None
+                                                  else {}), **extra}
+
+    cells = summarise([record(0, 19, 20), record(1, 1, 10)])['cells']
+    assert cells[0]['empty_plan_share'] == pytest.approx(20 / 30)
+    old = summarise([record(0, 19, 20), record(1, None, 10)])
+    assert old['cells'][0]['empty_plan_share'] is None     # not counted: unknown, not zero
 
 
 def test_a_sweep_of_another_seed_is_refused_in_the_same_directory(tmp_path):

@@ -133,3 +133,31 @@ def test_rotation_to_quaternion_near_half_turns():
         rot = 2 * np.outer(axis, axis) - np.eye(3)
         quat = rotation_to_quaternion(rot[None])[0]
         assert same_rotation(quat, np.r_[0.0, axis]) < 1e-12
+
+
+def rotation_about(axis: np.ndarray, angle: float) -> np.ndarray:
+    """Return the rotation matrix of angle about a unit axis (Rodrigues)."""
+    cross = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]],
+                      [-axis[1], axis[0], 0.0]])
+    return np.eye(3) + np.sin(angle) * cross + (1 - np.cos(angle)) * cross @ cross
+
+
+def test_rotation_to_quaternion_of_half_turns_about_diagonal_axes():
+    """Shepperd's method: signs from the matrix, not from rounding noise near half-turns."""
+    from probdis_ros.model.arms import quaternion_to_rotation
+
+    rng = np.random.default_rng(7)
+    axes = [np.array([1.0, 1.0, 0.0]) / np.sqrt(2), np.array([1.0, 1.0, 1.0]) / np.sqrt(3),
+            np.array([1.0, -2.0, 0.5]) / np.linalg.norm([1.0, -2.0, 0.5])]
+    axes += list(rng.normal(size=(30, 3)))
+    rotations = []
+    for axis in axes:
+        axis = axis / np.linalg.norm(axis)
+        for angle in (np.pi, np.pi - 1e-9, np.pi - 1e-5, np.pi / 2):
+            rotations.append(rotation_about(axis, angle))
+    rotations = np.array(rotations)
+    quats = rotation_to_quaternion(rotations)
+    np.testing.assert_allclose(np.linalg.norm(quats, axis=1), 1.0, atol=1e-12)
+    assert (quats[:, 0] >= 0).all()
+    back = quaternion_to_rotation(quats)
+    assert np.abs(back - rotations).max() < 1e-12

@@ -18,7 +18,14 @@ import numpy as np
 from probdis_ros.model import arm_for_setting, FailureMap, TaskSpace
 from probdis_ros.model.edge_costs import EdgeCoster, ReferenceEdgeCoster
 from probdis_ros.model.path_cost import edge_points, path_success_probability
-from probdis_ros.planning import EpsilonPlanner, make_planner, ProbRRT, RRTSettings
+from probdis_ros.planning import (
+    EpsilonPlanner,
+    HardThresholdObjective,
+    make_planner,
+    Method,
+    ProbRRT,
+    RRTSettings,
+)
 import pytest
 
 PLANAR = arm_for_setting('2d')
@@ -121,18 +128,49 @@ def test_compiled_edge_costs_match_the_reference():
 
 def test_hard_refuses_edges_above_its_threshold():
     fmap = wall_map()
-    hard = EdgeCoster(PLANAR, fmap, hard_threshold=0.01)
+    objective = HardThresholdObjective(0.01, c_fail=100.0)
+    hard = objective.coster(PLANAR, fmap)
     assert hard.cost(START, GOAL) == np.inf
     away = START + np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.2])
     points, _ = edge_points(START, away)
     if fmap.probability(PLANAR.fk(points)).max() <= 0.01:
         assert hard.cost(START, away) == pytest.approx(np.linalg.norm(away - START))
-    hard_planner = make_planner('hard', PLANAR, threshold=0.3)
+    hard_planner = make_planner('hard:0.3:100', PLANAR)
     plan = hard_planner.plan(START, GOAL, fmap, np.random.default_rng(2))
     assert plan is not None
     for a, b in zip(plan.path[:-1], plan.path[1:]):
         points, _ = edge_points(a, b)
         assert fmap.probability(PLANAR.fk(points)).max() <= 0.3
+
+
+def test_hard_draws_its_regions_with_its_own_c_fail():
+    """Hard's C_FAIL, not the map's, decides how far ahead of a failure is forbidden."""
+    fmap = wall_map()
+    wide, narrow = HardThresholdObjective(0.01, 100.0), HardThresholdObjective(0.01, 1e4)
+    assert wide.reach() == pytest.approx(np.sqrt(99 / 100))
+    assert narrow.reach() == pytest.approx(np.sqrt(99 / 1e4))
+    rng = np.random.default_rng(6)
+    sources = PLANAR.random_configurations(rng, 40)
+    for objective in (wide, narrow):
+        fast = objective.coster(PLANAR, fmap).costs(sources, GOAL)
+        slow = objective.coster(PLANAR, fmap, coster_type=ReferenceEdgeCoster).costs(
+            sources, GOAL)
+        np.testing.assert_allclose(fast, slow, rtol=1e-12)   # lengths or inf
+    wide_ok = np.isfinite(wide.coster(PLANAR, fmap).costs(sources, GOAL))
+    narrow_ok = np.isfinite(narrow.coster(PLANAR, fmap).costs(sources, GOAL))
+    assert (narrow_ok >= wide_ok).all() and narrow_ok.sum() > wide_ok.sum()
+
+
+def test_method_strings_are_parsed_and_built_in_one_place():
+    assert str(Method.parse('hard:0.02:3000')) == 'hard:0.02:3000'
+    assert Method.resolve('hard', threshold=0.05) == Method('hard', 0.05)
+    assert Method.parse('probabilistic:300').map_c_fail() == 300.0
+    assert Method.parse('epsilon:0.4').map_c_fail() == 100.0
+    planner = Method.parse('hard:0.02:3000').planner(PLANAR)
+    assert planner.objective == HardThresholdObjective(0.02, 3000.0)
+    assert isinstance(Method.parse('epsilon:0.4').planner(PLANAR), EpsilonPlanner)
+    with pytest.raises(ValueError, match='only hard takes'):
+        Method.parse('epsilon:0.2:5')
 
 
 def test_epsilon_ignores_the_map():
@@ -155,3 +193,18 @@ def test_bad_settings_and_configurations_are_refused():
                              np.random.default_rng(0))
     with pytest.raises(ValueError, match='unknown method'):
         make_planner('magic', PLANAR)
+
+
+def test_a_plan_time_budget_grows_more_and_no_budget_is_the_paper():
+    fmap = wall_map()
+    paper = ProbRRT(PLANAR).plan(START, GOAL, fmap, np.random.default_rng(4))
+    zero = ProbRRT(PLANAR, RRTSettings(plan_time=0.0)).plan(
+        START, GOAL, fmap, np.random.default_rng(4))
+    np.testing.assert_array_equal(paper.path, zero.path)
+    assert paper.tree_sizes[0] <= 101 and paper.tree_sizes[1] <= 101
+    budget = 3 * paper.plan_time_s + 0.05
+    anytime = ProbRRT(PLANAR, RRTSettings(plan_time=budget)).plan(
+        START, GOAL, fmap, np.random.default_rng(4))
+    assert sum(anytime.tree_sizes) > sum(paper.tree_sizes)
+    assert anytime.cost <= paper.cost * 1.5
+    assert anytime.plan_time_s < 2.5 * budget       # it stops near the budget

@@ -193,3 +193,21 @@ def test_an_episode_in_a_hand_made_world():
     assert result.success and result.paths <= 20
     assert result.failures == result.paths - 1
     assert len(result.plan_times_s) == result.paths
+
+
+def test_world_and_planner_draw_from_independent_streams_of_one_seed():
+    from probdis_ros.planning.seeds import PLANNER, stream, WORLD
+
+    for seed in range(5):
+        world, planner = stream(seed, WORLD).random(8), stream(seed, PLANNER).random(8)
+        shared = np.random.default_rng(seed).random(8)
+        assert not np.array_equal(world, planner)
+        assert not np.array_equal(world, shared) and not np.array_equal(planner, shared)
+        np.testing.assert_array_equal(stream(seed, PLANNER).random(8), planner)   # reproducible
+    loop = straight_loop(seed=3)
+    np.testing.assert_array_equal(loop.rng.random(4), stream(3, PLANNER).random(4))
+    # the episode's planner draws are its own: the same world, another seed, other plans
+    world = random_world('2d', 10, seed=5)
+    a = run_episode(world, 'epsilon:0.5', seed=5, max_paths=5)
+    b = run_episode(world, 'epsilon:0.5', seed=6, max_paths=5)
+    assert [x.path.tolist() for x in a.loop.attempts] != [x.path.tolist() for x in b.loop.attempts]

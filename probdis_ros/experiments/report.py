@@ -18,7 +18,9 @@
 For every (setting, obstacle count, method): the success rate within n planned paths for
 n = 1..max (an episode succeeded within n if it succeeded after at most n paths), with a 95 %
 percentile-bootstrap interval over the worlds; the mean number of paths of the successful
-episodes; the planning time per path.  Written as ``success.png`` (like the paper's Fig. 4),
+episodes; the planning time per path; the share of the paths that were empty plans (no
+feasible path found, the arm did not move; records older than that count are shown as
+unknown).  Written as ``success.png`` (like the paper's Fig. 4),
 ``sensitivity.png`` (success at the maximum, like its Fig. 5), ``summary.json`` and
 ``summary.md``.
 """
@@ -79,6 +81,8 @@ def summarise(records: list[dict]) -> dict:
         curve = success_curve(group, max_paths)
         wins = [r['paths'] for r in group if r['success']]
         times = [t for r in group for t in r['plan_times_s']]
+        counted = [r for r in group if 'empty_plans' in r]
+        paths = sum(r['paths'] for r in counted)
         cells.append({
             'setting': setting, 'obstacles': obstacles, 'method': method,
             'episodes': len(group), 'max_paths': max_paths,
@@ -86,6 +90,8 @@ def summarise(records: list[dict]) -> dict:
             'curve': curve,
             'mean_paths_successful': statistics.fmean(wins) if wins else None,
             'plan_time_s_median': statistics.median(times) if times else None,
+            'empty_plan_share': sum(r['empty_plans'] for r in counted) / paths
+            if paths and len(counted) == len(group) else None,
             'episode_wall_s_mean': statistics.fmean(r['wall_s'] for r in group)})
     return {'cells': cells, 'episodes': len(records),
             'bootstrap': {'samples': BOOTSTRAP_SAMPLES, 'seed': BOOTSTRAP_SEED,
@@ -95,15 +101,18 @@ def summarise(records: list[dict]) -> dict:
 def markdown_table(summary: dict) -> str:
     """Return the summary as a Markdown table (one row per setting, obstacles, method)."""
     lines = ['| setting | obstacles | method | episodes | success (95 % CI) '
-             '| mean paths when successful | median plan time per path [s] |',
-             '| --- | --- | --- | --- | --- | --- | --- |']
+             '| mean paths when successful | empty plans / paths '
+             '| median plan time per path [s] |',
+             '| --- | --- | --- | --- | --- | --- | --- | --- |']
     for c in summary['cells']:
         paths = '-' if c['mean_paths_successful'] is None else \
             f'{c["mean_paths_successful"]:.1f}'
         plan = '-' if c['plan_time_s_median'] is None else f'{c["plan_time_s_median"]:.3f}'
+        share = c.get('empty_plan_share')
+        empty = '?' if share is None else f'{share:.2f}'
         lines.append(f'| {c["setting"]} | {c["obstacles"]} | {c["method"]} | '
                      f'{c["episodes"]} | {c["success"]:.2f} ({c["ci95"][0]:.2f}-'
-                     f'{c["ci95"][1]:.2f}) | {paths} | {plan} |')
+                     f'{c["ci95"][1]:.2f}) | {paths} | {empty} | {plan} |')
     return '\n'.join(lines) + '\n'
 
 

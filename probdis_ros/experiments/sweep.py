@@ -17,10 +17,13 @@
 
 Each episode is independent and reproducible from its key: the world seed depends only on
 the sweep seed, the setting, the obstacle count and the world index, so every method meets
-the same worlds, and the loop's own seed is the world seed.  Finished episodes are appended
-to ``episodes.jsonl`` at once (one JSON object per line, flushed and synced); a rerun of the
-same command reads the file, drops a line cut short by a crash, and runs only what is
-missing, so an interrupted sweep loses at most the episodes that were running.
+the same worlds; the loop is given the same seed, from which the world and the planner draw
+independent streams (:mod:`probdis_ros.planning.seeds`).  Each record counts the paths that
+were empty plans (a planner that found no feasible path, so the arm did not move). Finished
+episodes are appended to ``episodes.jsonl`` at once (one JSON object per line, flushed and
+synced); a rerun of the same command reads the file, drops a line cut short by a crash, and
+runs only what is missing, so an interrupted sweep loses at most the episodes that were
+running.
 
 The scheduler is a LocalCluster of single-threaded worker processes by default, or any
 running Dask scheduler (``--scheduler tcp://host:8786``): the work is plain functions of
@@ -38,40 +41,10 @@ import sys
 import time
 import zlib
 
+from probdis_ros.planning.methods import Method
+
 SETTINGS = ('2d', '3d', '3d-orient')
 EPISODES_FILE = 'episodes.jsonl'
-
-
-@dataclass(frozen=True)
-class Method:
-    """A method and its parameter: probabilistic[:C_FAIL], hard:Y or epsilon:X."""
-
-    name: str
-    value: float | None = None
-
-    @classmethod
-    def parse(cls, text: str) -> Method:
-        """Parse ``name[:value]``; ValueError names what is wrong."""
-        name, _, value = text.strip().partition(':')
-        if name not in ('probabilistic', 'hard', 'epsilon'):
-            raise ValueError(f'unknown method {name!r} in {text!r} (probabilistic[:C_FAIL], '
-                             'hard:Y, epsilon:X)')
-        if not value:
-            if name != 'probabilistic':
-                raise ValueError(f'{name} needs its parameter, e.g. {name}:0.01')
-            return cls(name)
-        try:
-            number = float(value)
-        except ValueError:
-            raise ValueError(f'{text!r}: {value!r} is not a number') from None
-        bounds = {'probabilistic': (0.0, float('inf')), 'hard': (0.0, 1.0),
-                  'epsilon': (0.0, 1.0)}[name]
-        if not bounds[0] < number <= bounds[1]:
-            raise ValueError(f'{text!r}: {value} is outside ({bounds[0]}, {bounds[1]}]')
-        return cls(name, number)
-
-    def __str__(self) -> str:
-        return self.name if self.value is None else f'{self.name}:{self.value:g}'
 
 
 @dataclass(frozen=True)
@@ -86,7 +59,7 @@ class EpisodeKey:
 
     @property
     def world_seed(self) -> int:
-        """Return the seed of the world (and of the loop): the same for every method."""
+        """Return the seed of the world and of the loop (their own streams of it)."""
         text = f'{self.sweep_seed}/{self.setting}/{self.obstacles}/{self.world}'
         return zlib.crc32(text.encode())
 
@@ -105,23 +78,16 @@ def episode_keys(settings: Iterable[str], obstacles: Iterable[int], worlds: int,
 
 def run_episode_record(key: EpisodeKey, max_paths: int) -> dict:
     """Run one episode (in a worker) and return its JSON record."""
-    from probdis_ros.model.failure_map import DEFAULT_C_FAIL
     from probdis_ros.sim.episode import run_episode
 
     cpu0 = time.process_time()
     method = Method.parse(key.method)
     world = _world(key.setting, key.obstacles, key.world_seed)
-    kwargs = {}
-    if method.name == 'hard':
-        kwargs['threshold'] = method.value
-    elif method.name == 'epsilon':
-        kwargs['epsilon'] = method.value
-    c_fail = method.value if method.name == 'probabilistic' and method.value else DEFAULT_C_FAIL
     t0 = time.perf_counter()
-    result = run_episode(world, method.name, seed=key.world_seed, max_paths=max_paths,
-                         c_fail=c_fail, **kwargs)
+    result = run_episode(world, method, seed=key.world_seed, max_paths=max_paths)
     return {**asdict(key), 'id': key.name, 'world_seed': key.world_seed,
             'success': result.success, 'paths': result.paths, 'failures': result.failures,
+            'empty_plans': result.empty_plans,
             'max_paths': max_paths, 'plan_times_s': result.plan_times_s,
             'wall_s': time.perf_counter() - t0, 'rejected_draws': world.rejected_draws,
             # CPU time of the worker (world drawn here included): what the sweep costs

@@ -15,11 +15,12 @@
 """
 Edge costs for the planner: many edges per call, compiled; the cheapest edge best-first.
 
-:class:`EdgeCoster` evaluates the same cost as :func:`probdis_ros.model.path_cost.edge_cost`
-(probabilistic mode) or the Hard baseline's (length, or inf when any point probability
-exceeds the threshold), through the numba kernels in :mod:`probdis_ros.model.kernels`.
-:class:`ReferenceEdgeCoster` is the straightforward numpy evaluation of the same numbers; the
-tests check that a planner gives the same paths with either.
+:class:`EdgeCoster` evaluates an edge cost given by :class:`EdgeTerms` (what an objective of
+:mod:`probdis_ros.planning.objectives` reduces to: the failure-probability cost of
+:func:`probdis_ros.model.path_cost.edge_cost`, or the Hard baseline's length-or-infinite)
+through the numba kernels in :mod:`probdis_ros.model.kernels`.  :class:`ReferenceEdgeCoster`
+is the straightforward numpy evaluation of the same numbers; the tests check that a planner
+gives the same paths with either.
 """
 
 from __future__ import annotations
@@ -27,14 +28,8 @@ from __future__ import annotations
 import numpy as np
 from probdis_ros.model.arms import Arm, quaternion_to_rotation
 from probdis_ros.model.failure_map import FailureMap
-from probdis_ros.model.kernels import cheapest_edge_kernel, edge_costs_kernel
-from probdis_ros.model.path_cost import (
-    DEFAULT_DELTA,
-    DEFAULT_LENGTH_WEIGHT,
-    edge_points,
-    P_MAX,
-    risk,
-)
+from probdis_ros.model.kernels import AT_FAILURE, cheapest_edge_kernel, edge_costs_kernel
+from probdis_ros.model.path_cost import DEFAULT_DELTA, edge_points, EdgeTerms, P_MAX
 
 
 def _padded(values: np.ndarray, dim: int) -> np.ndarray:
@@ -44,37 +39,51 @@ def _padded(values: np.ndarray, dim: int) -> np.ndarray:
     return out
 
 
+def _batch(arm: Arm, sources: np.ndarray, target: np.ndarray, base, limits):
+    sources = np.ascontiguousarray(sources, dtype=float).reshape(-1, arm.n_joints)
+    target = np.ascontiguousarray(target, dtype=float)
+    base = np.zeros(len(sources)) if base is None else \
+        np.broadcast_to(np.asarray(base, dtype=float), len(sources))
+    limits = np.full(len(sources), np.inf) if limits is None else \
+        np.ascontiguousarray(np.broadcast_to(np.asarray(limits, dtype=float), len(sources)))
+    return sources, target, np.ascontiguousarray(base), limits
+
+
 class EdgeCoster:
     """Cost of straight joint-space edges under a fixed failure map (compiled)."""
 
     def __init__(self, arm: Arm, fmap: FailureMap, delta: float = DEFAULT_DELTA,
-                 length_weight: float = DEFAULT_LENGTH_WEIGHT,
-                 hard_threshold: float | None = None) -> None:
+                 terms: EdgeTerms | None = None) -> None:
         if fmap.task_space is not arm.task_space:
             raise ValueError(f'failure map is {fmap.task_space.value} but the arm works in '
                              f'{arm.task_space.value}')
         self.arm = arm
         self.fmap = fmap
         self.delta = float(delta)
-        self.length_weight = float(length_weight)
-        self.hard_threshold = hard_threshold
+        self.terms = terms or EdgeTerms()
+        self.c_fail = float(fmap.c_fail if self.terms.c_fail is None else self.terms.c_fail)
         dim = arm.task_space.dim
         self._failures = (          # points and directions padded to 3-D (z = 0 in 2-D)
             _padded(fmap.points, dim), _padded(fmap.directions, dim),
             np.ascontiguousarray(quaternion_to_rotation(fmap.orientations)).reshape(-1, 3, 3),
-            float(fmap.c_fail), bool(arm.task_space.has_orientation))
+            self.c_fail, bool(arm.task_space.has_orientation))
         self._arm = arm.kernel_params()
-        self._threshold = -1.0 if hard_threshold is None else float(hard_threshold)
+        self._terms = (float(self.terms.length_weight), float(self.terms.risk_weight),
+                       float(self.terms.cap), P_MAX)
 
     def costs(self, sources: np.ndarray, target: np.ndarray, toward: bool = True,
-              base: np.ndarray | None = None) -> np.ndarray:
-        """Return ``base[i] + cost(sources[i] -> target)``, or ``target -> sources[i]``."""
-        sources = np.ascontiguousarray(sources, dtype=float).reshape(-1, self.arm.n_joints)
-        target = np.ascontiguousarray(target, dtype=float)
-        base = np.zeros(len(sources)) if base is None else np.asarray(base, dtype=float)
+              base: np.ndarray | float | None = None,
+              limits: np.ndarray | float | None = None) -> np.ndarray:
+        """
+        Return ``base[i] + cost(sources[i] -> target)``, or ``target -> sources[i]``.
+
+        With ``limits``, an edge whose own cost reaches ``limits[i]`` is given as inf (and
+        stops being costed there).
+        """
+        sources, target, base, limits = _batch(self.arm, sources, target, base, limits)
         out = np.empty(len(sources))
-        edge_costs_kernel(sources, target, base, toward, self.delta, self.length_weight,
-                          self._threshold, P_MAX, *self._arm, *self._failures, out)
+        edge_costs_kernel(sources, target, base, limits, toward, self.delta, *self._terms,
+                          *self._arm, *self._failures, out)
         return out
 
     def cost(self, start: np.ndarray, end: np.ndarray) -> float:
@@ -88,12 +97,9 @@ class EdgeCoster:
 
         (-1, inf) when no edge is feasible.  Ties go to the lowest index, as with argmin.
         """
-        sources = np.ascontiguousarray(sources, dtype=float).reshape(-1, self.arm.n_joints)
-        target = np.ascontiguousarray(target, dtype=float)
-        base = np.zeros(len(sources)) if base is None else np.asarray(base, dtype=float)
+        sources, target, base, _ = _batch(self.arm, sources, target, base, None)
         index, total = cheapest_edge_kernel(sources, target, base, toward, self.delta,
-                                            self.length_weight, self._threshold, P_MAX,
-                                            *self._arm, *self._failures)
+                                            *self._terms, *self._arm, *self._failures)
         return int(index), float(total)
 
 
@@ -101,25 +107,24 @@ class ReferenceEdgeCoster(EdgeCoster):
     """The same costs, evaluated point by point with numpy (slow; for tests and checks)."""
 
     def costs(self, sources: np.ndarray, target: np.ndarray, toward: bool = True,
-              base: np.ndarray | None = None) -> np.ndarray:
+              base: np.ndarray | float | None = None,
+              limits: np.ndarray | float | None = None) -> np.ndarray:
         """Return every total, point by point."""
-        sources = np.asarray(sources, dtype=float).reshape(-1, self.arm.n_joints)
-        target = np.asarray(target, dtype=float)
+        sources, target, base, limits = _batch(self.arm, sources, target, base, limits)
         out = np.empty(len(sources))
         for i, source in enumerate(sources):
             a, b = (source, target) if toward else (target, source)
             points, step = edge_points(a, b, self.delta)
-            length = step * len(points)
             if len(points) == 0:
                 out[i] = 0.0
                 continue
-            p = self.fmap.probability(self.arm.fk(points)) if len(self.fmap) else \
-                np.zeros(len(points))
-            if self.hard_threshold is None:
-                out[i] = risk(p, step, self.delta) + self.length_weight * length
-            else:
-                out[i] = length if p.max() <= self.hard_threshold else np.inf
-        return out if base is None else out + np.asarray(base, dtype=float)
+            p = self.fmap.probability(self.arm.fk(points), self.c_fail) if len(self.fmap) \
+                else np.zeros(len(points))
+            start = self.fmap.probability(self.arm.fk(a), self.c_fail, AT_FAILURE)[0] \
+                if len(self.fmap) and self.terms.cap < np.inf else 0.0
+            cost = self.terms.reference_cost(p, step, self.delta, step * len(points), start)
+            out[i] = cost if cost < limits[i] else np.inf
+        return out + base
 
     def cheapest(self, sources: np.ndarray, target: np.ndarray, toward: bool = True,
                  base: np.ndarray | None = None) -> tuple[int, float]:

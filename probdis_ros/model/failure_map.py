@@ -127,8 +127,17 @@ class FailureMap:
         """Forget every failure."""
         self.__init__(self.task_space, self.c_fail)
 
-    def probability(self, poses: TaskPoints) -> np.ndarray:
-        """``P(FAIL | c, F)`` for each pose of the batch, in [0, 1] (0 for an empty map)."""
+    def probability(self, poses: TaskPoints, c_fail: float | None = None,
+                    behind_within: float = 0.0) -> np.ndarray:
+        """
+        ``P(FAIL | c, F)`` for each pose of the batch, in [0, 1] (0 for an empty map).
+
+        ``c_fail`` replaces the map's C_FAIL (the Hard baseline draws its regions with its
+        own); None uses the map's.  A pose within ``behind_within`` [m] of a failure counts
+        as behind it (alpha = 0) instead of the paper's alpha = pi at the failure itself
+        (where a Hard edge starts: :mod:`probdis_ros.model.kernels`).
+        """
+        c_fail = self.c_fail if c_fail is None else float(c_fail)
         x = np.asarray(poses.positions, dtype=float)
         if len(self) == 0:
             return np.zeros(len(x))
@@ -137,9 +146,10 @@ class FailureMap:
         dist = np.sqrt(dist2)
         cos_alpha = np.einsum('nfd,fd->nf', to_fail, self.directions)
         with np.errstate(invalid='ignore', divide='ignore'):
-            cos_alpha = np.where(dist > 0, cos_alpha / dist, -1.0)
+            cos_alpha = np.where(dist2 > behind_within ** 2, cos_alpha / dist,
+                                 1.0 if behind_within > 0 else -1.0)
         alpha = np.arccos(np.clip(cos_alpha, -1.0, 1.0))
-        prob = (alpha / np.pi) ** 3 / (1.0 + self.c_fail * dist2)
+        prob = (alpha / np.pi) ** 3 / (1.0 + c_fail * dist2)
         if self.task_space.has_orientation:
             if poses.orientations is None:
                 raise FailureMapError('this map models orientation: poses need quaternions')

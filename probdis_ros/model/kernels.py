@@ -53,19 +53,42 @@ def quaternion_kernel(rot: np.ndarray, quat_out: np.ndarray) -> None:
     """
     Write unit quaternions ``(w, x, y, z)``, ``w >= 0``, of rotation matrices ``(N, 3, 3)``.
 
-    Each component's magnitude comes from the diagonal and its sign from the off-diagonal
-    differences, which is accurate everywhere without branching on the largest component.
+    Shepperd's method: the largest of 4w^2, 4x^2, 4y^2, 4z^2 (from the trace and the
+    diagonal) is taken by a square root, and the other three components from the
+    off-diagonal sums and differences divided by it.  Signs then follow the matrix exactly;
+    taking every magnitude from the diagonal instead loses the signs near half-turns, where
+    the off-diagonal differences that would carry them are rounding noise.
     """
     for k in range(rot.shape[0]):
         r = rot[k]
-        w = 0.5 * np.sqrt(max(0.0, 1.0 + r[0, 0] + r[1, 1] + r[2, 2]))
-        x = 0.5 * np.sqrt(max(0.0, 1.0 + r[0, 0] - r[1, 1] - r[2, 2]))
-        y = 0.5 * np.sqrt(max(0.0, 1.0 - r[0, 0] + r[1, 1] - r[2, 2]))
-        z = 0.5 * np.sqrt(max(0.0, 1.0 - r[0, 0] - r[1, 1] + r[2, 2]))
-        x = np.copysign(x, r[2, 1] - r[1, 2])
-        y = np.copysign(y, r[0, 2] - r[2, 0])
-        z = np.copysign(z, r[1, 0] - r[0, 1])
+        trace = r[0, 0] + r[1, 1] + r[2, 2]
+        if trace >= r[0, 0] and trace >= r[1, 1] and trace >= r[2, 2]:
+            s = 2.0 * np.sqrt(max(0.0, 1.0 + trace))          # 4w
+            w = 0.25 * s
+            x = (r[2, 1] - r[1, 2]) / s
+            y = (r[0, 2] - r[2, 0]) / s
+            z = (r[1, 0] - r[0, 1]) / s
+        elif r[0, 0] >= r[1, 1] and r[0, 0] >= r[2, 2]:
+            s = 2.0 * np.sqrt(max(0.0, 1.0 + 2.0 * r[0, 0] - trace))   # 4x
+            w = (r[2, 1] - r[1, 2]) / s
+            x = 0.25 * s
+            y = (r[0, 1] + r[1, 0]) / s
+            z = (r[0, 2] + r[2, 0]) / s
+        elif r[1, 1] >= r[2, 2]:
+            s = 2.0 * np.sqrt(max(0.0, 1.0 + 2.0 * r[1, 1] - trace))   # 4y
+            w = (r[0, 2] - r[2, 0]) / s
+            x = (r[0, 1] + r[1, 0]) / s
+            y = 0.25 * s
+            z = (r[1, 2] + r[2, 1]) / s
+        else:
+            s = 2.0 * np.sqrt(max(0.0, 1.0 + 2.0 * r[2, 2] - trace))   # 4z
+            w = (r[1, 0] - r[0, 1]) / s
+            x = (r[0, 2] + r[2, 0]) / s
+            y = (r[1, 2] + r[2, 1]) / s
+            z = 0.25 * s
         norm = np.sqrt(w * w + x * x + y * y + z * z)
+        if w < 0.0:
+            norm = -norm
         quat_out[k, 0] = w / norm
         quat_out[k, 1] = x / norm
         quat_out[k, 2] = y / norm
@@ -93,6 +116,8 @@ def quaternion_kernel(rot: np.ndarray, quat_out: np.ndarray) -> None:
 
 PLANAR = 0
 CHAIN = 1
+#: [m] a pose this near a failure point is at it (where an edge may start: _start_probability)
+AT_FAILURE = 1e-6
 AXIS_CHAIN = 2
 CHUNK = 16
 
@@ -250,7 +275,7 @@ def _arccos(x):
 
 @numba.njit(cache=True, error_model='numpy')
 def _chunk_probabilities(pos, rot, count, f_points, f_dirs, f_rots, c_fail, use_orient,
-                         soa, p_out):
+                         soa, p_out, near2=0.0, at_failure=-1.0):
     """
     Write max over failures of P_COORD * (1 - 0.5 D_ORIENT) for each pose of the chunk.
 
@@ -281,8 +306,9 @@ def _chunk_probabilities(pos, rot, count, f_points, f_dirs, f_rots, c_fail, use_
             dy = fy - py[i]
             dz = fz - pz[i]
             d2 = dx * dx + dy * dy + dz * dz
-            # at the failure itself alpha counts as pi (ratio 1): cos = -1
-            c = (ux * dx + uy * dy + uz * dz) / np.sqrt(d2) if d2 > 0.0 else -1.0
+            # at the failure itself (d2 <= near2) cos alpha is at_failure: -1 (alpha = pi,
+            # ratio 1) as in the paper, +1 (behind it) for where a Hard edge starts
+            c = (ux * dx + uy * dy + uz * dz) / np.sqrt(d2) if d2 > near2 else at_failure
             ratio = _arccos(min(1.0, max(-1.0, c))) / np.pi
             p = ratio * ratio * ratio / (1.0 + c_fail * d2)
             # orientation: 1 - 0.5 D_ORIENT from trace(G^T R) (use_orient is constant in the
@@ -296,23 +322,62 @@ def _chunk_probabilities(pos, rot, count, f_points, f_dirs, f_rots, c_fail, use_
 
 @numba.njit(cache=True, inline='always')
 def _chunk_log_survival(p_buf, count, p_max):
-    """Return sum log(1 - min(p, p_max)) over the chunk, with one logarithm."""
+    """Return (sum log(1 - min(p, p_max)), max p) over the chunk, with one logarithm."""
     survival = 1.0
+    highest = 0.0
     for i in range(count):
         survival *= 1.0 - min(p_buf[i], p_max)
-    return np.log(survival)
+        highest = max(highest, p_buf[i])
+    return np.log(survival), highest
+
+
+@numba.njit(cache=True, inline='always')
+def _descend(p_buf, count, cap, level):
+    """
+    Return the level after the chunk's points, or -1 if a point is forbidden.
+
+    The rule of a cap (the Hard baseline's Y): a point above the cap is forbidden, except
+    while the edge is leaving a region above the cap that it started in, its probability
+    never rising on the way out (``level`` is the highest probability still allowed).
+    """
+    for i in range(count):
+        if p_buf[i] > level:
+            return -1.0
+        level = max(cap, p_buf[i])
+    return level
 
 
 @numba.njit(cache=True)
-def edge_cost_kernel(a, b, delta, length_weight, hard_threshold, p_max, kind,
+def _start_probability(cs, sn, n, kind, joint_params, offsets, bases, tip_offset,
+                       tip_rotation, f_points, f_dirs, f_rots, c_fail, use_orient, pos, rot,
+                       soa, p_buf):
+    """
+    Return the failure probability at the start of an edge (its cosines and sines).
+
+    A start within AT_FAILURE of a failure point counts as behind it (probability 0 from
+    that failure): an arm held where it was blocked is where it came from, and it may leave
+    backwards but not go on.  (At the point itself the direction is undefined; the paper's
+    alpha = pi would let a Hard edge run on through the obstacle, its probability falling.)
+    """
+    n_joints = cs.shape[0]
+    _chunk_poses(cs.copy(), sn.copy(), np.ones(n_joints), np.zeros(n_joints), cs, -1, 1, n,
+                 kind, joint_params, offsets, bases, tip_offset, tip_rotation, pos, rot)
+    _chunk_probabilities(pos, rot, 1, f_points, f_dirs, f_rots, c_fail, use_orient, soa,
+                         p_buf, AT_FAILURE ** 2, 1.0)
+    return p_buf[0]
+
+
+@numba.njit(cache=True)
+def edge_cost_kernel(a, b, limit, delta, length_weight, risk_weight, cap, p_max, kind,
                      joint_params, offsets, bases, tip_offset, tip_rotation,
                      f_points, f_dirs, f_rots, c_fail, use_orient, pos, rot, soa, p_buf):
     """
-    Return the cost of edge a -> b.
+    Return the cost of edge a -> b, or inf once it reaches limit (it only grows on the way).
 
-    Probabilistic mode (hard_threshold < 0): ``-sum (s/delta) log(1 - p) + length_weight L``.
-    Hard mode: ``L`` if every p <= hard_threshold, else inf.  pos, rot, soa and p_buf are
-    buffers for CHUNK points.
+    ``length_weight L - risk_weight sum (s/delta) log(1 - p)``, inf if a p > cap is not on the
+    way out of a region above the cap that the edge started in (:func:`_descend`; the
+    objective's terms, :class:`probdis_ros.model.path_cost.EdgeTerms`).  pos, rot, soa and
+    p_buf are buffers for CHUNK points.
     """
     n_joints = a.shape[0]
     length = 0.0
@@ -322,11 +387,12 @@ def edge_cost_kernel(a, b, delta, length_weight, hard_threshold, p_max, kind,
     if length == 0.0:
         return 0.0
     n = max(1, int(np.ceil(length / delta - 1e-12)))
-    hard = hard_threshold >= 0.0
-    cost = length if hard else length_weight * length
+    cost = length_weight * length
+    if cost >= limit:
+        return np.inf
     if f_points.shape[0] == 0:
         return cost
-    weight = (length / n) / delta
+    weight = risk_weight * (length / n) / delta
     cs = np.empty(n_joints)
     sn = np.empty(n_joints)
     cd = np.empty(n_joints)
@@ -342,26 +408,40 @@ def edge_cost_kernel(a, b, delta, length_weight, hard_threshold, p_max, kind,
         sn[j] = np.sin(angle)
         cd[j] = np.cos(step)
         sd[j] = np.sin(step)
+    level = cap
+    if cap < np.inf:
+        level = max(cap, _start_probability(cs, sn, n, kind, joint_params, offsets, bases,
+                                            tip_offset, tip_rotation, f_points, f_dirs,
+                                            f_rots, c_fail, use_orient, pos, rot, soa, p_buf))
     for k0 in range(0, n, CHUNK):
         count = min(CHUNK, n - k0)
         _chunk_poses(cs, sn, cd, sd, b, k0, count, n, kind, joint_params, offsets, bases,
                      tip_offset, tip_rotation, pos, rot)
         _chunk_probabilities(pos, rot, count, f_points, f_dirs, f_rots, c_fail, use_orient,
                              soa, p_buf)
-        if not hard:
-            cost -= weight * _chunk_log_survival(p_buf, count, p_max)
-            continue
-        for i in range(count):
-            if p_buf[i] > hard_threshold:
+        log_survival, highest = _chunk_log_survival(p_buf, count, p_max)
+        if highest > cap:
+            level = _descend(p_buf, count, cap, level)
+            if level < 0.0:
                 return np.inf
+        else:
+            level = cap
+        cost -= weight * log_survival
+        if cost >= limit:
+            return np.inf
     return cost
 
 
 @numba.njit(cache=True, nogil=True)
-def edge_costs_kernel(sources, target, base, toward, delta, length_weight, hard_threshold,
-                      p_max, kind, joint_params, offsets, bases, tip_offset, tip_rotation,
-                      f_points, f_dirs, f_rots, c_fail, use_orient, out):
-    """Write ``base[i] + cost(sources[i] -> target)`` (``target -> sources[i]`` unless toward)."""
+def edge_costs_kernel(sources, target, base, limits, toward, delta, length_weight,
+                      risk_weight, cap, p_max, kind, joint_params, offsets, bases, tip_offset,
+                      tip_rotation, f_points, f_dirs, f_rots, c_fail, use_orient, out):
+    """
+    Write ``base[i] + cost(sources[i] -> target)`` (``target -> sources[i]`` unless toward).
+
+    An edge whose cost reaches ``limits[i]`` is abandoned there and written as inf: exact
+    pruning for RRT* rewiring, which only needs edges cheaper than a neighbour's cost.
+    """
     pos = np.empty((CHUNK, 3))
     rot = np.empty((CHUNK, 3, 3))
     soa = np.empty((12, CHUNK))
@@ -369,10 +449,11 @@ def edge_costs_kernel(sources, target, base, toward, delta, length_weight, hard_
     for i in range(sources.shape[0]):
         a = sources[i] if toward else target
         b = target if toward else sources[i]
-        out[i] = base[i] + edge_cost_kernel(a, b, delta, length_weight, hard_threshold, p_max,
-                                            kind, joint_params, offsets, bases, tip_offset,
-                                            tip_rotation, f_points, f_dirs, f_rots, c_fail,
-                                            use_orient, pos, rot, soa, p_buf)
+        out[i] = base[i] + edge_cost_kernel(a, b, limits[i], delta, length_weight,
+                                            risk_weight, cap, p_max, kind, joint_params,
+                                            offsets, bases, tip_offset, tip_rotation,
+                                            f_points, f_dirs, f_rots, c_fail, use_orient, pos,
+                                            rot, soa, p_buf)
 
 
 @numba.njit(cache=True)
@@ -396,9 +477,9 @@ def farthest_kernel(samples, nodes):
 
 
 @numba.njit(cache=True, nogil=True)
-def cheapest_edge_kernel(sources, target, base, toward, delta, length_weight, hard_threshold,
-                         p_max, kind, joint_params, offsets, bases, tip_offset, tip_rotation,
-                         f_points, f_dirs, f_rots, c_fail, use_orient):
+def cheapest_edge_kernel(sources, target, base, toward, delta, length_weight, risk_weight,
+                         cap, p_max, kind, joint_params, offsets, bases, tip_offset,
+                         tip_rotation, f_points, f_dirs, f_rots, c_fail, use_orient):
     """
     Return (i, total) minimising ``base[i] + cost(edge i)``; (-1, inf) if none is finite.
 
@@ -409,8 +490,8 @@ def cheapest_edge_kernel(sources, target, base, toward, delta, length_weight, ha
     Edges run sources[i] -> target if toward, else target -> sources[i].
     """
     m, n_joints = sources.shape
-    hard = hard_threshold >= 0.0
     bound = np.empty(m)           # lower bound of the total (exact when done)
+    level = np.full(m, cap)       # highest point probability still allowed (see _descend)
     done = np.zeros(m, dtype=np.bool_)
     steps = np.zeros(m, dtype=np.int64)
     k_done = np.zeros(m, dtype=np.int64)
@@ -427,13 +508,13 @@ def cheapest_edge_kernel(sources, target, base, toward, delta, length_weight, ha
         for j in range(n_joints):
             length += (b[j] - a[j]) ** 2
         length = np.sqrt(length)
-        bound[i] = base[i] + (length if hard else length_weight * length)
+        bound[i] = base[i] + length_weight * length
         if length == 0.0 or f_points.shape[0] == 0:
             done[i] = True
             continue
         n = max(1, int(np.ceil(length / delta - 1e-12)))
         steps[i] = n
-        weight[i] = (length / n) / delta
+        weight[i] = risk_weight * (length / n) / delta
         run0 = 0.0
         run1 = 0.0
         for j in range(n_joints):
@@ -450,6 +531,13 @@ def cheapest_edge_kernel(sources, target, base, toward, delta, length_weight, ha
     rot = np.empty((CHUNK, 3, 3))
     soa = np.empty((12, CHUNK))
     p_buf = np.empty(CHUNK)
+    if cap < np.inf:
+        for i in range(m):
+            if not done[i]:
+                level[i] = max(cap, _start_probability(
+                    cs[i], sn[i], steps[i], kind, joint_params, offsets, bases, tip_offset,
+                    tip_rotation, f_points, f_dirs, f_rots, c_fail, use_orient, pos, rot, soa,
+                    p_buf))
     while True:
         pick = -1
         for i in range(m):   # lowest bound first; on equal bounds a finished edge, then index
@@ -470,11 +558,14 @@ def cheapest_edge_kernel(sources, target, base, toward, delta, length_weight, ha
         _chunk_probabilities(pos, rot, count, f_points, f_dirs, f_rots, c_fail, use_orient,
                              soa, p_buf)
         k_done[i] += count
-        if not hard:
-            bound[i] -= weight[i] * _chunk_log_survival(p_buf, count, p_max)
-        for r in range(count):
-            if hard and p_buf[r] > hard_threshold:
-                bound[i] = np.inf
-                break
+        log_survival, highest = _chunk_log_survival(p_buf, count, p_max)
+        if highest > cap:
+            level[i] = _descend(p_buf, count, cap, level[i])
+        else:
+            level[i] = cap
+        if level[i] < 0.0:
+            bound[i] = np.inf
+        else:
+            bound[i] -= weight[i] * log_survival
         if k_done[i] == steps[i]:
             done[i] = True

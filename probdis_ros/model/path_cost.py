@@ -32,6 +32,7 @@ a large finite amount instead of infinity.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from itertools import pairwise
 import math
 
@@ -45,6 +46,53 @@ DEFAULT_DELTA = 0.04
 DEFAULT_LENGTH_WEIGHT = 0.01
 #: Largest point failure probability used in a logarithm.
 P_MAX = 1.0 - 1e-9
+
+
+@dataclass(frozen=True)
+class EdgeTerms:
+    """
+    The numbers that make an edge cost, as the compiled kernels take them.
+
+    ``cost = length_weight * L - risk_weight * sum (s / delta) log(1 - p)``, or infinite
+    when a point probability exceeds ``cap`` -- unless the edge started above the cap and is
+    on its way out, its probability not rising (a hard constraint may be left, never
+    entered); the probabilities are computed with ``c_fail`` (None: the map's own C_FAIL).
+    Objectives (:mod:`probdis_ros.planning.objectives`) are what the planner is handed;
+    these are what they reduce to, so that one generic kernel serves every objective without
+    a branch per method.
+    """
+
+    length_weight: float = DEFAULT_LENGTH_WEIGHT
+    risk_weight: float = 1.0
+    cap: float = math.inf
+    c_fail: float | None = None
+
+    def __post_init__(self) -> None:
+        """Refuse terms that would make a cost negative or meaningless."""
+        if not (self.length_weight >= 0 and self.risk_weight >= 0 and self.cap >= 0):
+            raise ValueError('length_weight, risk_weight and cap must be >= 0')
+        if self.c_fail is not None and not (math.isfinite(self.c_fail) and self.c_fail > 0):
+            raise ValueError(f'c_fail must be a positive number, got {self.c_fail!r}')
+
+    def allows(self, probabilities: np.ndarray, start: float = 0.0) -> bool:
+        """Tell whether an edge from probability start through these points keeps the cap."""
+        level = max(self.cap, start)
+        for p in np.asarray(probabilities, dtype=float):
+            if p > level:
+                return False
+            level = max(self.cap, p)
+        return True
+
+    def reference_cost(self, probabilities: np.ndarray, step: float, delta: float,
+                       length: float, start: float = 0.0) -> float:
+        """Return the cost of an edge from its point probabilities (numpy, for checks)."""
+        p = np.asarray(probabilities, dtype=float)
+        if not self.allows(p, start):
+            return math.inf
+        cost = self.length_weight * length
+        if self.risk_weight:
+            cost += self.risk_weight * risk(p, step, delta)
+        return cost
 
 
 def edge_points(start: np.ndarray, end: np.ndarray,

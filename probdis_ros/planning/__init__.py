@@ -12,41 +12,33 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Planning (no rclpy): ProbRRT, the Hard and Epsilon baselines, the disentangling loop."""
+"""Planning (no rclpy): objectives, the tree, ProbRRT, the baselines, methods, the loop."""
 
 from __future__ import annotations
 
-from dataclasses import replace
-
-from probdis_ros.model.arms import Arm
 from probdis_ros.planning.disentangle import Disentangler, State
-from probdis_ros.planning.epsilon import EpsilonPlanner
+from probdis_ros.planning.epsilon import DEFAULT_EPSILON, EpsilonPlanner
+from probdis_ros.planning.methods import make_planner, Method, METHODS
+from probdis_ros.planning.objectives import (
+    DEFAULT_THRESHOLD,
+    FailureProbabilityObjective,
+    HARD_C_FAIL,
+    HardThresholdObjective,
+    Objective,
+)
 from probdis_ros.planning.prob_rrt import Plan, ProbRRT, RRTSettings
-
-METHODS = ('probabilistic', 'hard', 'epsilon')
-DEFAULT_THRESHOLD = 0.01
-DEFAULT_EPSILON = 0.2
-
-
-def make_planner(method: str, arm: Arm, settings: RRTSettings | None = None,
-                 threshold: float = DEFAULT_THRESHOLD, epsilon: float = DEFAULT_EPSILON):
-    """Return the planner of a method: 'probabilistic', 'hard' (threshold) or 'epsilon'."""
-    settings = settings or RRTSettings()
-    if method == 'probabilistic':
-        return ProbRRT(arm, replace(settings, hard_threshold=None))
-    if method == 'hard':
-        return ProbRRT(arm, replace(settings, hard_threshold=threshold))
-    if method == 'epsilon':
-        return EpsilonPlanner(arm, epsilon)
-    raise ValueError(f'unknown method {method!r}; choose one of {", ".join(METHODS)}')
-
 
 __all__ = [
     'DEFAULT_EPSILON',
     'DEFAULT_THRESHOLD',
+    'HARD_C_FAIL',
     'METHODS',
     'Disentangler',
     'EpsilonPlanner',
+    'FailureProbabilityObjective',
+    'HardThresholdObjective',
+    'Method',
+    'Objective',
     'Plan',
     'ProbRRT',
     'RRTSettings',

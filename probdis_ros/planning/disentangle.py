@@ -26,7 +26,11 @@ The simulator and the ROS planner node drive the same object::
     loop.report_retreated(current)          #   back to the last via point reached
 
 It stops on success, after ``max_paths`` paths (N_ITER), or when asked to (:meth:`stop`).
-A plan that finds no feasible path (possible for Hard) still counts as one of the paths.
+A plan that finds no feasible path (possible for Hard) still counts as one of the paths, as
+an *empty plan* (:attr:`Disentangler.empty_plans`): reports show how many of a method's
+paths were empty, so that a baseline that cannot act is seen as such.  The planner draws
+from the PLANNER stream of ``seed`` (:mod:`probdis_ros.planning.seeds`), independent of a
+world drawn from the same seed.
 
 Decision beyond the paper: the retreat goes back to the last via point reached, as in the
 paper, but retraces the way the arm came (the via points it reached, path after path, which
@@ -47,6 +51,7 @@ from typing import Protocol
 import numpy as np
 from probdis_ros.model.arms import Arm
 from probdis_ros.model.failure_map import FailureMap
+from probdis_ros.planning.seeds import PLANNER, stream
 
 #: Joint-space distance [rad] used to find the task-space direction of a blocked motion.
 DIRECTION_PROBE = 1e-3
@@ -106,6 +111,7 @@ class Attempt:
     plan_time_s: float
     blocked_at: np.ndarray | None = None
     segment: int = -1
+    empty: bool = False     # the planner found no feasible path; the arm did not move
 
 
 @dataclass
@@ -134,7 +140,7 @@ class Disentangler:
             raise ValueError('min_retreat must be >= 0')
         if self.fmap is None:
             self.fmap = FailureMap(self.arm.task_space)
-        self.rng = np.random.default_rng(self.seed)
+        self.rng = stream(self.seed, PLANNER)
         # the way the arm came: configurations it moved between without contact, in order
         self._route: list[np.ndarray] = []
 
@@ -142,6 +148,11 @@ class Disentangler:
     def paths_tried(self) -> int:
         """Return the number of paths planned so far."""
         return len(self.attempts)
+
+    @property
+    def empty_plans(self) -> int:
+        """Return how many of the paths were empty plans (no feasible path found)."""
+        return sum(a.empty for a in self.attempts)
 
     @property
     def plan_times(self) -> list[float]:
@@ -167,7 +178,7 @@ class Disentangler:
             elapsed = time.perf_counter() - t0
             path = None if plan is None else np.asarray(plan.path, dtype=float)
             self.attempts.append(Attempt(path if path is not None else current[None].copy(),
-                                         elapsed))
+                                         elapsed, empty=path is None))
             if path is not None:
                 self.state = State.EXECUTING
                 return path

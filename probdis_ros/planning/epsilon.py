@@ -29,11 +29,14 @@ from probdis_ros.model.arms import Arm
 from probdis_ros.model.failure_map import FailureMap
 from probdis_ros.planning.prob_rrt import Plan
 
+#: X of the Epsilon baseline when none is given (the paper's Epsilon 0.2).
+DEFAULT_EPSILON = 0.2
+
 
 class EpsilonPlanner:
     """Straight to the goal with probability epsilon, else a random direction."""
 
-    def __init__(self, arm: Arm, epsilon: float = 0.2, step: float = 1.0) -> None:
+    def __init__(self, arm: Arm, epsilon: float = DEFAULT_EPSILON, step: float = 1.0) -> None:
         if not 0.0 <= epsilon <= 1.0:
             raise ValueError(f'epsilon must be in [0, 1], got {epsilon}')
         if step <= 0:

@@ -13,7 +13,7 @@
 # limitations under the License.
 
 """
-ProbRRT: the paper's probabilistic bidirectional RRT (Algorithms 1-5), and the Hard baseline.
+ProbRRT: the paper's probabilistic bidirectional RRT (Algorithms 1-5), for any objective.
 
 Two trees grow for K iterations each, one from the start and one from the goal.  Each
 iteration (Algorithm 2):
@@ -29,22 +29,34 @@ iteration (Algorithm 2):
   (README "Planner speed").
 * NewConfiguration: a step of at most ``step`` (joint-space length) from that node toward the
   sample; both ends are inside the box of joint limits, so the step is too.
-* RewireNeighbours (RRT*): the new node takes the cheapest parent among the nodes within
-  ``rewire_radius``, and neighbours whose cost improves through it are re-parented.
+* RewireNeighbours (RRT*): the new node takes the cheapest parent among its neighbours, and
+  neighbours whose cost improves through it are re-parented (their subtrees' costs follow,
+  :meth:`Tree.reparent`).  The paper does not say which neighbours; we take OMPL's RRT*
+  default, the ``k = ceil(k_RRT log n)`` nearest in joint space with
+  ``k_RRT = rewire_factor * e * (1 + 1/d)`` (d joints, n nodes; about 15 of 100 nodes for
+  d = 7), which always holds neighbours, unlike a fixed radius below the step (0.8 rad
+  against 1 rad held ~0.05 neighbours and re-parented 0 of 573 nodes).  ``rewire_factor = 0``
+  turns rewiring off (the closest node is the parent).  Only edges cheaper than a
+  neighbour's cost matter, so they are costed only that far (exact pruning).
 
-Costs are additive edge costs (:mod:`probdis_ros.model.path_cost`), always of the edge in the
-direction the arm will execute it: parent -> child in the start tree, child -> parent in the
-goal tree (whose costs are therefore costs-to-go).  Connect (Algorithm 1) joins each leaf of
-the goal tree to the start-tree node (of its ``connect_candidates`` nearest; 0: all) that
-gives the cheapest whole path, and the least-cost start-to-goal path is returned.
+Costs are additive edge costs given by the planner's objective
+(:mod:`probdis_ros.planning.objectives`), always of the edge in the direction the arm will
+execute it: parent -> child in the start tree, child -> parent in the goal tree (whose costs
+are therefore costs-to-go).  Connect (Algorithm 1) joins each leaf of the goal tree to the
+start-tree node (of its ``connect_candidates`` nearest; 0: all) that gives the cheapest whole
+path, and the least-cost start-to-goal path is returned.  The planner never knows which
+method it runs: Probabilistic and Hard differ only in the objective they hand it.
 
-The Hard baseline is the same planner with ``hard_threshold = Y``: an edge with any point
-probability above Y is infeasible and the cost of a feasible edge is its length.
+Anytime (beyond the paper): with a ``plan_time`` budget the trees grow in further rounds of K
+iterations each while the budget has room for another round as long as the last, and Connect
+then takes the best path of the larger trees; ``plan_time = 0`` (the default) is the paper's
+single round of K, exactly.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
+import math
 import time
 
 import numpy as np
@@ -52,6 +64,8 @@ from probdis_ros.model.arms import Arm
 from probdis_ros.model.edge_costs import EdgeCoster
 from probdis_ros.model.failure_map import FailureMap
 from probdis_ros.model.kernels import farthest_kernel
+from probdis_ros.planning.objectives import FailureProbabilityObjective, Objective
+from probdis_ros.planning.tree import Tree
 
 
 @dataclass
@@ -63,11 +77,11 @@ class RRTSettings:
     n_random: int = 100             # |C_RAND|
     p_goal: float = 0.1             # P_GOAL
     step: float = 1.0               # longest new edge [rad] (NewConfiguration)
-    rewire_radius: float = 0.8      # RRT* neighbourhood [rad]
-    length_weight: float = 0.01     # lambda
+    rewire_factor: float = 1.0      # RRT* neighbours: k = ceil(factor e (1 + 1/d) log n); 0: none
+    rewire_radius: float = 0.0      # and only those this near [rad]; 0: no limit
+    plan_time: float = 0.0          # anytime budget [s]: more rounds of K while it lasts; 0: one
     closest_candidates: int = 10    # k nearest in joint space are costed; 0: every node (paper)
     connect_candidates: int = 10    # likewise for Connect
-    hard_threshold: float | None = None   # Y of the Hard baseline; None: probabilistic
 
     def __post_init__(self) -> None:
         """Refuse settings the planner cannot work with."""
@@ -76,12 +90,11 @@ class RRTSettings:
                   (self.n_random >= 1, 'n_random must be >= 1'),
                   (0.0 <= self.p_goal <= 1.0, 'p_goal must be in [0, 1]'),
                   (self.step > 0, 'step must be > 0'),
+                  (self.rewire_factor >= 0, 'rewire_factor must be >= 0'),
                   (self.rewire_radius >= 0, 'rewire_radius must be >= 0'),
-                  (self.length_weight >= 0, 'length_weight must be >= 0'),
+                  (self.plan_time >= 0, 'plan_time must be >= 0'),
                   (self.closest_candidates >= 0, 'closest_candidates must be >= 0'),
-                  (self.connect_candidates >= 0, 'connect_candidates must be >= 0'),
-                  (self.hard_threshold is None or 0 <= self.hard_threshold <= 1,
-                   'hard_threshold must be in [0, 1]')]
+                  (self.connect_candidates >= 0, 'connect_candidates must be >= 0')]
         for ok, message in checks:
             if not ok:
                 raise ValueError(message)
@@ -95,78 +108,18 @@ class Plan:
     cost: float
     plan_time_s: float = 0.0
     tree_sizes: tuple[int, int] = (0, 0)
-
-
-@dataclass
-class _Tree:
-    """Nodes, parents and costs of one tree; reverse for the goal tree (costs-to-go)."""
-
-    nodes: np.ndarray
-    positions: np.ndarray
-    reverse: bool
-    parent: list[int] = field(default_factory=list)
-    edge: list[float] = field(default_factory=list)
-    costs: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    size: int = 0
-
-    @classmethod
-    def rooted(cls, root: np.ndarray, root_position: np.ndarray, capacity: int,
-               reverse: bool) -> _Tree:
-        nodes = np.empty((capacity, len(root)))
-        positions = np.empty((capacity, len(root_position)))
-        tree = cls(nodes, positions, reverse, costs=np.empty(capacity))
-        tree.append(root, root_position, -1, 0.0, 0.0)
-        return tree
-
-    @property
-    def cost(self) -> np.ndarray:
-        """Cost-to-come (start tree) or cost-to-go (goal tree) of every node."""
-        return self.costs[:self.size]
-
-    def append(self, node: np.ndarray, position: np.ndarray, parent: int, edge: float,
-               cost: float) -> int:
-        self.nodes[self.size] = node
-        self.positions[self.size] = position
-        self.parent.append(parent)
-        self.edge.append(edge)
-        self.costs[self.size] = cost
-        self.size += 1
-        return self.size - 1
-
-    def reparent(self, index: int, parent: int, edge: float) -> None:
-        """Move a node under a new parent and update the costs of its whole subtree."""
-        self.parent[index] = parent
-        self.edge[index] = edge
-        children: dict[int, list[int]] = {}
-        for child, par in enumerate(self.parent):
-            children.setdefault(par, []).append(child)
-        stack = [index]
-        while stack:
-            node = stack.pop()
-            self.costs[node] = self.costs[self.parent[node]] + self.edge[node]
-            stack.extend(children.get(node, []))
-
-    def chain(self, index: int) -> list[int]:
-        """Node indices from index up to the root."""
-        out = [index]
-        while self.parent[out[-1]] >= 0:
-            out.append(self.parent[out[-1]])
-        return out
-
-    def leaves(self) -> np.ndarray:
-        has_child = np.zeros(self.size, dtype=bool)
-        for par in self.parent[1:]:
-            has_child[par] = True
-        return np.flatnonzero(~has_child)
+    rewires: int = 0                # RRT* re-parentings in both trees
 
 
 class ProbRRT:
-    """Plans least-cost joint-space paths under a failure map."""
+    """Plans least-cost joint-space paths under a failure map, for an objective."""
 
     def __init__(self, arm: Arm, settings: RRTSettings | None = None,
+                 objective: Objective | None = None,
                  coster_type: type[EdgeCoster] = EdgeCoster) -> None:
         self.arm = arm
         self.settings = settings or RRTSettings()
+        self.objective = objective or FailureProbabilityObjective()
         self.coster_type = coster_type
         self._warm_up()
 
@@ -177,8 +130,8 @@ class ProbRRT:
         pose = self.arm.fk(middle)
         q = None if pose.orientations is None else pose.orientations[0]
         fmap.add(pose.positions[0], np.ones(self.arm.task_space.dim), q)
-        coster = self.coster_type(self.arm, fmap, self.settings.delta)
-        coster.costs(middle[None], self.arm.upper)
+        coster = self.objective.coster(self.arm, fmap, self.settings.delta, self.coster_type)
+        coster.costs(middle[None], self.arm.upper, limits=np.inf)
         coster.cheapest(middle[None], self.arm.upper)
         farthest_kernel(pose.positions, pose.positions)
 
@@ -186,23 +139,40 @@ class ProbRRT:
              rng: np.random.Generator) -> Plan | None:
         """Return the least-cost path from start to goal found, or None if none is feasible."""
         t0 = time.perf_counter()
-        s = self.settings
-        start = self._checked(start, 'start')
-        goal = self._checked(goal, 'goal')
-        coster = self.coster_type(self.arm, fmap, s.delta, s.length_weight, s.hard_threshold)
-        capacity = s.iterations + 1
-        ends = self.arm.positions(np.array([start, goal]))
-        trees = (_Tree.rooted(start, ends[0], capacity, reverse=False),
-                 _Tree.rooted(goal, ends[1], capacity, reverse=True))
-        for tree, other in (trees, trees[::-1]):
-            targets = self._random_configurations(tree, other.nodes[0], rng)
-            for target in targets:
-                self._extend(tree, target, coster)
+        coster = self.objective.coster(self.arm, fmap, self.settings.delta, self.coster_type)
+        trees = self.grow(start, goal, coster, rng, t0)
         plan = self._connect(trees[0], trees[1], coster)
         if plan is not None:
             plan.plan_time_s = time.perf_counter() - t0
             plan.tree_sizes = (trees[0].size, trees[1].size)
+            plan.rewires = trees[0].rewires + trees[1].rewires
         return plan
+
+    def grow(self, start: np.ndarray, goal: np.ndarray, coster: EdgeCoster,
+             rng: np.random.Generator, t0: float | None = None) -> tuple[Tree, Tree]:
+        """
+        Grow the start and the goal tree, K iterations each (public for inspection).
+
+        With a ``plan_time`` budget, rounds of K iterations per tree go on while the budget
+        (counted from t0) has room for another round as long as the last one; without, one
+        round: the paper's planner exactly.
+        """
+        s = self.settings
+        start = self._checked(start, 'start')
+        goal = self._checked(goal, 'goal')
+        t0 = time.perf_counter() if t0 is None else t0
+        capacity = s.iterations + 1
+        ends = self.arm.positions(np.array([start, goal]))
+        trees = (Tree.rooted(start, ends[0], capacity, reverse=False),
+                 Tree.rooted(goal, ends[1], capacity, reverse=True))
+        while True:
+            round_start = time.perf_counter()
+            for tree, other in (trees, trees[::-1]):
+                for target in self._random_configurations(tree, other.nodes[0], rng):
+                    self._extend(tree, target, coster)
+            now = time.perf_counter()
+            if now - t0 + (now - round_start) > s.plan_time:
+                return trees
 
     def _checked(self, config: np.ndarray, name: str) -> np.ndarray:
         config = self.arm.as_batch(config)[0]
@@ -210,7 +180,7 @@ class ProbRRT:
             raise ValueError(f'{name} configuration is outside the joint limits: {config}')
         return config
 
-    def _random_configurations(self, tree: _Tree, other_root: np.ndarray,
+    def _random_configurations(self, tree: Tree, other_root: np.ndarray,
                                rng: np.random.Generator):
         """
         Yield RandomConfiguration's target of each of the tree's K iterations.
@@ -231,13 +201,13 @@ class ProbRRT:
             yield samples[rows][farthest_kernel(positions[rows],
                                                 tree.positions[:tree.size])]
 
-    def _nearest(self, tree: _Tree, config: np.ndarray, k: int) -> np.ndarray:
+    def _nearest(self, tree: Tree, config: np.ndarray, k: int) -> np.ndarray:
         """Tree node indices sorted by joint-space distance to config (the k nearest if k)."""
         d2 = ((tree.nodes[:tree.size] - config) ** 2).sum(axis=1)
         order = np.argsort(d2, kind='stable')
         return order[:k] if k else order
 
-    def _extend(self, tree: _Tree, target: np.ndarray, coster: EdgeCoster) -> None:
+    def _extend(self, tree: Tree, target: np.ndarray, coster: EdgeCoster) -> None:
         s = self.settings
         candidates = self._nearest(tree, target, s.closest_candidates)
         best, _ = coster.cheapest(tree.nodes[candidates], target, toward=not tree.reverse)
@@ -251,30 +221,44 @@ class ProbRRT:
         new = tree.nodes[closest] + direction * min(1.0, s.step / distance)
         self._insert(tree, new, closest, coster)
 
-    def _insert(self, tree: _Tree, new: np.ndarray, closest: int, coster: EdgeCoster) -> None:
+    def _neighbours(self, tree: Tree, config: np.ndarray, closest: int) -> np.ndarray:
+        """Return RRT*'s neighbourhood of config: its k nearest nodes, and closest."""
+        factor = self.settings.rewire_factor
+        if factor == 0:
+            return np.array([closest])
+        d = self.arm.n_joints
+        k = math.ceil(factor * math.e * (1 + 1 / d) * math.log(tree.size + 1))
+        near = self._nearest(tree, config, k)
+        radius = self.settings.rewire_radius
+        if radius > 0:
+            d2 = ((tree.nodes[near] - config) ** 2).sum(axis=1)
+            near = near[d2 <= radius * radius]
+        return near if (near == closest).any() else np.append(near, closest)
+
+    def _insert(self, tree: Tree, new: np.ndarray, closest: int, coster: EdgeCoster) -> None:
         """Add new under its cheapest neighbour (RRT*), then rewire the neighbours."""
-        s = self.settings
-        d2 = ((tree.nodes[:tree.size] - new) ** 2).sum(axis=1)
-        near = np.flatnonzero(d2 <= s.rewire_radius ** 2)
-        if not (near == closest).any():
-            near = np.sort(np.append(near, closest))
+        near = self._neighbours(tree, new, closest)
         costs_to = tree.cost[near]
         best, total = coster.cheapest(tree.nodes[near], new, toward=not tree.reverse,
                                       base=costs_to)
         if best < 0:
             return
+        parent = int(near[best])
+        edge = total - costs_to[best]
         position = self.arm.positions(new)[0]
-        index = tree.append(new, position, int(near[best]), total - costs_to[best], total)
-        others = np.concatenate((near[:best], near[best + 1:]))
+        index = tree.append(new, position, parent, edge, tree.costs[parent] + edge)
+        others = np.delete(near, best)
         if len(others) == 0:
             return
-        out = coster.costs(tree.nodes[others], new, toward=tree.reverse)
-        through = tree.cost[index] + out
-        for node, edge, total in zip(others, out, through):
-            if total < tree.cost[node] and node not in tree.chain(index):
-                tree.reparent(int(node), index, float(edge))
+        # only an edge cheaper than what the neighbour costs now can improve it
+        out = coster.costs(tree.nodes[others], new, toward=tree.reverse,
+                           limits=tree.cost[others] - tree.cost[index])
+        for node, edge_out in zip(others.tolist(), out.tolist()):
+            if tree.cost[index] + edge_out < tree.cost[node] and \
+                    not tree.is_ancestor(node, index):
+                tree.reparent(node, index, edge_out)
 
-    def _connect(self, start_tree: _Tree, goal_tree: _Tree, coster: EdgeCoster) -> Plan | None:
+    def _connect(self, start_tree: Tree, goal_tree: Tree, coster: EdgeCoster) -> Plan | None:
         """Join each goal-tree leaf to its best start-tree node; keep the cheapest path."""
         s = self.settings
         best_total, best_pair = np.inf, None

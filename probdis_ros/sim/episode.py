@@ -16,18 +16,13 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from probdis_ros.model.failure_map import DEFAULT_C_FAIL, FailureMap
-from probdis_ros.planning import (
-    DEFAULT_EPSILON,
-    DEFAULT_THRESHOLD,
-    Disentangler,
-    make_planner,
-    RRTSettings,
-    State,
-)
+from probdis_ros.model.failure_map import FailureMap
+from probdis_ros.planning import Disentangler, Method, RRTSettings, State
+from probdis_ros.sim.compliant_arm import CompliantArm
 from probdis_ros.sim.worlds import World
 
 
@@ -42,26 +37,26 @@ class EpisodeResult:
     loop: Disentangler
     world: World
     traces: list[np.ndarray]
+    empty_plans: int = 0
 
     def summary(self) -> dict:
         """Return the JSON summary printed by ``probdis sim --json``."""
         return {'success': self.success, 'paths': self.paths, 'failures': self.failures,
-                'plan_times_s': self.plan_times_s}
+                'empty_plans': self.empty_plans, 'plan_times_s': self.plan_times_s}
 
 
-def run_episode(world: World, method: str = 'probabilistic', seed: int = 0,
-                max_paths: int = 20, threshold: float = DEFAULT_THRESHOLD,
-                epsilon: float = DEFAULT_EPSILON, settings: RRTSettings | None = None,
-                c_fail: float = DEFAULT_C_FAIL) -> EpisodeResult:
-    """Disentangle world.start -> world.goal with a method; reproducible from seed."""
-    arm = world.arm
-    sim = world.compliant_arm()
-    planner = make_planner(method, arm, settings, threshold, epsilon)
-    loop = Disentangler(arm, planner, world.goal, FailureMap(arm.task_space, c_fail),
-                        max_paths=max_paths, seed=seed)
-    current = world.start.copy()
+def drive(loop: Disentangler, sim: CompliantArm, current: np.ndarray,
+          until: Callable[[Disentangler], bool] | None = None
+          ) -> tuple[np.ndarray, list[np.ndarray]]:
+    """
+    Run the loop against the simulated arm until it finishes, or until ``until(loop)``.
+
+    Plan, execute; a blocked path is reported and its retreat executed.  Returns where the
+    arm ended and the joint trace of every executed path.  (The one loop of the simulator:
+    episodes and the benchmark's map-making both drive it.)
+    """
     traces = []
-    while True:
+    while until is None or not until(loop):
         path = loop.next_path(current)
         if path is None:
             break
@@ -71,8 +66,26 @@ def run_episode(world: World, method: str = 'probabilistic', seed: int = 0,
         if not run.blocked:
             loop.report_completed(current)
             continue
-        back = sim.execute(loop.report_blocked(current, run.segment))
-        current = back.config
+        current = sim.execute(loop.report_blocked(current, run.segment)).config
         loop.report_retreated(current)
+    return current, traces
+
+
+def run_episode(world: World, method: str | Method = 'probabilistic', seed: int = 0,
+                max_paths: int = 20, settings: RRTSettings | None = None,
+                c_fail: float | None = None) -> EpisodeResult:
+    """
+    Disentangle world.start -> world.goal with a method; reproducible from seed.
+
+    method is a :class:`Method` or its string (``hard:0.02``; a bare name takes its default
+    parameter); c_fail, if given, overrides the C_FAIL of the map the method would use.
+    """
+    if isinstance(method, str):
+        method = Method.resolve(method)
+    arm = world.arm
+    planner = method.planner(arm, settings)
+    fmap = FailureMap(arm.task_space, method.map_c_fail() if c_fail is None else c_fail)
+    loop = Disentangler(arm, planner, world.goal, fmap, max_paths=max_paths, seed=seed)
+    _, traces = drive(loop, world.compliant_arm(), world.start.copy())
     return EpisodeResult(loop.state is State.SUCCEEDED, loop.paths_tried, len(loop.fmap),
-                         loop.plan_times, loop, world, traces)
+                         loop.plan_times, loop, world, traces, loop.empty_plans)

@@ -42,6 +42,7 @@ from pathlib import Path
 import numpy as np
 from probdis_ros.model import arm_for_setting, SETTINGS
 from probdis_ros.model.arms import Arm
+from probdis_ros.planning.seeds import stream, WORLD
 from probdis_ros.sim.compliant_arm import CompliantArm, densify
 from probdis_ros.sim.obstacles import Obstacle
 from probdis_ros.sim.oracle import find_free_path
@@ -208,13 +209,15 @@ def random_world(setting: str, n_obstacles: int, seed: int, max_draws: int = 200
     """
     Draw a solvable, entangled world of a setting from a seed (reproducibly).
 
+    The world draws from the seed's WORLD stream (:mod:`probdis_ros.planning.seeds`), so a
+    planner given the same seed draws independently of it.
     Raises RuntimeError if max_draws draws in a row are rejected.
     """
     if n_obstacles < 1:
         raise ValueError('a world needs at least one obstacle')
     arm = arm_for_setting(setting)
     spec = SPECS[setting]
-    rng = np.random.default_rng(seed)
+    rng = stream(seed, WORLD)
     for draw in range(max_draws):
         start = _reachable_start(arm, rng, setting)
         goal = _goal_for(arm, start, rng, spec, setting)

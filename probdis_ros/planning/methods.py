@@ -1,0 +1,131 @@
+# Copyright 2026 probdis_ros contributors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Methods: the method string parsed, and its planner built, in one place.
+
+``probabilistic[:C_FAIL]``, ``hard:Y[:C_HARD]`` and ``epsilon:X`` name a method and its
+parameter everywhere (the CLI, the sweep, the robot experiment, the planner node).  A
+:class:`Method` knows the C_FAIL of the map its loop learns (``probabilistic:C`` sets it;
+the others use the default) and builds its planner: ProbRRT with an objective, or Epsilon.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from probdis_ros.model.arms import Arm
+from probdis_ros.model.failure_map import DEFAULT_C_FAIL
+from probdis_ros.model.path_cost import DEFAULT_LENGTH_WEIGHT
+from probdis_ros.planning.epsilon import DEFAULT_EPSILON, EpsilonPlanner
+from probdis_ros.planning.objectives import (
+    DEFAULT_THRESHOLD,
+    FailureProbabilityObjective,
+    HARD_C_FAIL,
+    HardThresholdObjective,
+)
+from probdis_ros.planning.prob_rrt import ProbRRT, RRTSettings
+
+METHODS = ('probabilistic', 'hard', 'epsilon')
+_USAGE = 'probabilistic[:C_FAIL], hard:Y[:C_HARD], epsilon:X'
+
+
+def _number(text: str, whole: str, low: float, high: float) -> float:
+    try:
+        number = float(text)
+    except ValueError:
+        raise ValueError(f'{whole!r}: {text!r} is not a number') from None
+    if not low < number <= high:
+        raise ValueError(f'{whole!r}: {text} is outside ({low:g}, {high:g}]')
+    return number
+
+
+@dataclass(frozen=True)
+class Method:
+    """A method and its parameter: probabilistic[:C_FAIL], hard:Y[:C_HARD] or epsilon:X."""
+
+    name: str
+    value: float | None = None
+    c_hard: float | None = None     # hard only: C_FAIL of its forbidden regions
+
+    @classmethod
+    def parse(cls, text: str) -> Method:
+        """Parse ``name[:value[:c_hard]]``; ValueError names what is wrong."""
+        name, _, rest = text.strip().partition(':')
+        value, _, c_hard = rest.partition(':')
+        if name not in METHODS:
+            raise ValueError(f'unknown method {name!r} in {text!r} ({_USAGE})')
+        if not value:
+            if name != 'probabilistic':
+                raise ValueError(f'{name} needs its parameter, e.g. {name}:0.01')
+            return cls(name)
+        if c_hard and name != 'hard':
+            raise ValueError(f'{text!r}: only hard takes a second parameter ({_USAGE})')
+        high = float('inf') if name == 'probabilistic' else 1.0
+        return cls(name, _number(value, text, 0.0, high),
+                   _number(c_hard, text, 0.0, float('inf')) if c_hard else None)
+
+    @classmethod
+    def from_parameters(cls, name: str, threshold: float = DEFAULT_THRESHOLD,
+                        epsilon: float = DEFAULT_EPSILON, c_fail: float | None = None
+                        ) -> Method:
+        """Return the method of separate parameters (the node's, the CLI's flags)."""
+        if name not in METHODS:
+            raise ValueError(f'unknown method {name!r}; choose one of {", ".join(METHODS)}')
+        value = {'probabilistic': c_fail, 'hard': threshold, 'epsilon': epsilon}[name]
+        return cls(name, None if value is None else float(value))
+
+    @classmethod
+    def resolve(cls, text: str, threshold: float = DEFAULT_THRESHOLD,
+                epsilon: float = DEFAULT_EPSILON, c_fail: float | None = None) -> Method:
+        """Return the method of a string (``hard:0.02``), or of a bare name and the values."""
+        if ':' in text:
+            return cls.parse(text)
+        return cls.from_parameters(text.strip(), threshold, epsilon, c_fail)
+
+    def __str__(self) -> str:
+        if self.value is None:
+            return self.name
+        text = f'{self.name}:{self.value:g}'
+        return text if self.c_hard is None else f'{text}:{self.c_hard:g}'
+
+    def map_c_fail(self, default: float = DEFAULT_C_FAIL) -> float:
+        """Return the C_FAIL of the failure map the loop learns with this method."""
+        return self.value if self.name == 'probabilistic' and self.value else default
+
+    def objective(self, length_weight: float = DEFAULT_LENGTH_WEIGHT):
+        """Return the objective the planner minimises (None for Epsilon: no search)."""
+        if self.name == 'probabilistic':
+            return FailureProbabilityObjective(length_weight)
+        if self.name == 'hard':
+            return HardThresholdObjective(
+                DEFAULT_THRESHOLD if self.value is None else self.value,
+                HARD_C_FAIL if self.c_hard is None else self.c_hard)
+        return None
+
+    def planner(self, arm: Arm, settings: RRTSettings | None = None,
+                length_weight: float = DEFAULT_LENGTH_WEIGHT):
+        """Return the planner of this method for an arm."""
+        if self.name == 'epsilon':
+            return EpsilonPlanner(arm, DEFAULT_EPSILON if self.value is None else self.value)
+        return ProbRRT(arm, settings, self.objective(length_weight))
+
+
+def make_planner(method: str | Method, arm: Arm, settings: RRTSettings | None = None,
+                 threshold: float = DEFAULT_THRESHOLD, epsilon: float = DEFAULT_EPSILON,
+                 length_weight: float = DEFAULT_LENGTH_WEIGHT):
+    """Return the planner of a method string (``hard:0.02``) or name with its parameter."""
+    if isinstance(method, str):
+        method = Method.resolve(method, threshold, epsilon)
+    return method.planner(arm, settings, length_weight)
