@@ -141,21 +141,27 @@ def cmd_experiment_report(args: argparse.Namespace) -> int:
 
 def cmd_experiment_robot(args: argparse.Namespace) -> int:
     """Run the robot scenarios through the ROS nodes against the mock iiwa (Table I)."""
+    from probdis_ros.physics.scene import scene_path
     from probdis_ros.planning.methods import Method
     from probdis_ros.resources import scenario_path
     from probdis_ros.ros.robot_experiment import robot_table, run_robot_experiment
 
     scenarios = _split(args.scenarios)
-    missing = [s for s in scenarios if not scenario_path(s).is_file()]
+    physics = args.engine == 'physics'
+    missing = [s for s in scenarios
+               if not (scene_path(s) if physics else scenario_path(s)).is_file()]
     if missing:
-        raise UsageError(f'no scenario file {missing[0]!r} (a path, or a name in '
-                         'config/scenarios/)')
+        kind = 'scene' if physics else 'scenario'
+        raise UsageError(f'no {kind} file {missing[0]!r} (a path, or a name in '
+                         f'config/{kind}s/)')
     methods = [Method.parse(m) for m in _split(args.methods)]
     if args.runs < 1 or not 0 < args.velocity_scaling <= 1:
         raise UsageError('--runs must be positive and --velocity-scaling in (0, 1]')
     say = None if args.json else (lambda line: print(line, file=sys.stderr, flush=True))
     records = run_robot_experiment(Path(args.out), scenarios, methods, args.runs,
-                                   args.velocity_scaling, args.timeout, say)
+                                   args.velocity_scaling, args.timeout, say,
+                                   engine=args.engine, sim_time=args.sim_time,
+                                   real_time_factor=args.real_time_factor)
     wanted = {(s, str(m)) for s in scenarios for m in methods}
     records = [r for r in records if (r['scenario'], r['method']) in wanted]
     if args.json:
@@ -186,6 +192,9 @@ def cmd_map_plot(args: argparse.Namespace) -> int:
 def cmd_sim(args: argparse.Namespace) -> int:
     """Run one simulated disentangling episode."""
     import statistics
+
+    if args.engine == 'physics':
+        return _sim_physics(args)
 
     from probdis_ros.planning import Method
     from probdis_ros.resources import scenario_path
@@ -224,6 +233,76 @@ def cmd_sim(args: argparse.Namespace) -> int:
         print(f'(world drawn after {world.rejected_draws} rejected unsolvable draws)')
     if args.plot:
         print(f'wrote {args.plot}')
+    return 0
+
+
+def _sim_physics(args: argparse.Namespace) -> int:
+    """Run one episode against the physics arm offline (``--engine physics``)."""
+    import numpy as np
+    from probdis_ros.model import iiwa_arm
+    from probdis_ros.physics.episode import run_physics_episode
+    from probdis_ros.physics.picture import plot_scene_run
+    from probdis_ros.planning import Method
+
+    if args.scenario or args.setting:
+        raise UsageError('--engine physics runs a --scene, not a --scenario or --setting')
+    method = Method.resolve(args.method, args.threshold, args.epsilon)
+    episode = run_physics_episode(args.scene, method, seed=args.seed or 0,
+                                  max_paths=args.max_paths)
+    if args.plot:
+        arm = iiwa_arm()
+        failures = [(np.array(f['x']), np.array(f['v'])) for f in episode.failures]
+        outcome = 'disentangled' if episode.success else 'not disentangled'
+        plot_scene_run(episode.scene, arm.fk(episode.configs[::2]).positions, failures,
+                       arm.fk(episode.scene.goal[None]).positions[0], args.plot,
+                       f'{episode.scene.name}: {method}: {outcome} after {episode.paths} '
+                       f'path(s), {len(failures)} failure(s)')
+    if args.json:
+        _print_json(episode.summary())
+        return 0
+    summary = episode.summary()
+    outcome = 'disentangled' if episode.success else f'NOT disentangled ({episode.message})'
+    print(f'{episode.scene.name}: {method}: {outcome} after {episode.paths} path(s), '
+          f'{len(episode.failures)} failure(s) learned; {summary["sim_time_s"]} s simulated '
+          f'in {summary["wall_time_s"]} s ({summary["real_time_factor"]}x real time), peak '
+          f'contact force {summary["peak_contact_force_n"]} N')
+    if args.plot:
+        print(f'wrote {args.plot}')
+    return 0
+
+
+def cmd_bench_physics(args: argparse.Namespace) -> int:
+    """Measure the physics mock: speed, free-motion tracking, a block."""
+    from dataclasses import asdict
+
+    from probdis_ros.bench import machine
+    from probdis_ros.physics import measure
+
+    figures = {'machine': machine(),
+               'real_time_factor': measure.real_time_factor(args.scene, args.seconds),
+               'free_tracking': [asdict(measure.free_tracking(v, args.scene))
+                                 for v in (0.2, 1.0)],
+               'block': [asdict(measure.straight_block(args.scene, v)) for v in (0.2, 1.0)]}
+    if args.json:
+        _print_json(figures)
+        return 0
+    rtf = figures['real_time_factor']
+    print(f'physics mock on {figures["machine"]}, scene {args.scene}')
+    print(f'real-time factor: arm alone {rtf["arm_alone"]:.0f}x, with JTC and the driver '
+          f'filter {rtf["command_path"]:.0f}x (time step {rtf["timestep_s"] * 1e3:.0f} ms)')
+    for t in figures['free_tracking']:
+        print(f'free motion at velocity scaling {t["velocity_scaling"]}: L1 gap peak '
+              f'{t["peak_gap"]:.3f} rad, {t["final_gap"]:.3f} rad when judged {t["verdict"]} '
+              f'{t["settle_s"]:.2f} s after the planned end')
+    for b, v in zip(figures['block'], (0.2, 1.0)):
+        contact = 'no contact' if b['contact_s'] is None else f'contact at {b["contact_s"]:.2f} s'
+        detected = 'not detected' if b['detected_s'] is None else \
+            f'detected at {b["detected_s"]:.2f} s'
+        print(f'straight path into the obstacle at velocity scaling {v}: {contact}, '
+              f'{detected} (planned end {b["planned_s"]:.2f} s); gap then '
+              f'{b["gap_at_detection"]:.3f} rad, contact force '
+              f'{b["force_at_detection_n"]:.0f} N (peak {b["peak_force_n"]:.0f} N); the flange '
+              f'moved {b["flange_moved_m"] * 100:.1f} cm from contact to detection')
     return 0
 
 
@@ -333,9 +412,13 @@ def cmd_status(args: argparse.Namespace) -> int:
 
 def cmd_demo(args: argparse.Namespace) -> int:
     """Disentangle against the mock iiwa: two processes over DDS on localhost."""
-    from probdis_ros.ros.demo import run_demo
+    from probdis_ros.ros.demo import DEFAULT_SCENE, run_demo
 
-    result = run_demo(args.scenario, args.timeout, quiet=args.json)
+    world = args.scenario or (DEFAULT_SCENE if args.engine == 'physics' else 'demo_iiwa')
+    if args.plot and args.engine != 'physics':
+        raise UsageError('--plot draws a physics scene; use --engine physics')
+    result = run_demo(world, args.timeout, quiet=args.json, engine=args.engine,
+                      sim_time=args.sim_time)
     summary = {k: result[k] for k in ('success', 'paths', 'failures', 'replan_latency_s')}
     if args.json:
         _print_json(summary)
@@ -347,7 +430,30 @@ def cmd_demo(args: argparse.Namespace) -> int:
               f'max {latency["max"]:.3f} s')
         if result['bag']:
             print(f'recorded to {result["bag"]} (probdis replay {result["bag"]})')
+    if args.plot and result['bag']:
+        out = _plot_bag(world, result['bag'], args.plot)
+        if not args.json:
+            print(f'wrote {out}')
     return 0 if result['success'] else 1
+
+
+def _plot_bag(scene_name: str, bag: str, out: str) -> Path:
+    """Draw a physics scene with the flange path and the blocks a recorded run shows."""
+    import numpy as np
+    from probdis_ros.model import iiwa_arm
+    from probdis_ros.physics import load_scene
+    from probdis_ros.physics.picture import plot_scene_run
+    from probdis_ros.ros.replay import replay
+
+    scene = load_scene(scene_name)
+    result = replay(Path(bag))
+    arm = iiwa_arm()
+    flange = arm.fk(np.array(result.configs)).positions
+    failures = list(zip(result.fmap.points, result.fmap.directions))
+    outcome = 'disentangled' if result.success else 'not disentangled'
+    return plot_scene_run(scene, flange, failures, arm.fk(scene.goal[None]).positions[0], out,
+                          f'{scene.name}: {outcome} after {result.paths} path(s), '
+                          f'{len(result.blocks)} block(s)')
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
@@ -451,6 +557,13 @@ def build_parser() -> argparse.ArgumentParser:
     bplan.add_argument('--json', action='store_true',
                        help='print {"median_s_empty_map": float, "median_s_19_failures": float}')
     bplan.set_defaults(handler=cmd_bench_plan)
+    bphys = bench_sub.add_parser('physics', help='the physics mock: real-time factor, '
+                                 'free-motion tracking gap, a block (contact force, delay)')
+    bphys.add_argument('--scene', default='demo_hook', help='scene file or name')
+    bphys.add_argument('--seconds', type=float, default=5.0,
+                       help='simulated seconds timed for the real-time factor')
+    bphys.add_argument('--json', action='store_true', help='print one JSON object')
+    bphys.set_defaults(handler=cmd_bench_physics)
 
     from probdis_ros.model.path_cost import DEFAULT_DELTA, DEFAULT_LENGTH_WEIGHT
 
@@ -497,7 +610,13 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument('--c-fail', type=float, default=DEFAULT_C_FAIL,
                      help='C_FAIL of the failure map [1/m^2] (probabilistic:C overrides it)')
     sim.add_argument('--json', action='store_true', help='print one JSON object')
-    sim.add_argument('--plot', metavar='OUT.png', help='draw the (2-D) episode')
+    sim.add_argument('--plot', metavar='OUT.png', help='draw the episode (2-D, or the physics '
+                     'scene with the flange path and the failures)')
+    sim.add_argument('--engine', choices=('kinematic', 'physics'), default='kinematic',
+                     help='the simulated arm: the kinematic one of the paper\'s settings, or '
+                     'MuJoCo in joint impedance through JTC (with --scene)')
+    sim.add_argument('--scene', default='demo_hook', help='with --engine physics: a scene '
+                     'file, or the name of one in config/scenes/')
     sim.set_defaults(handler=cmd_sim)
 
     for name, text in (('planner', 'run the planner node (ROS arguments pass through)'),
@@ -519,7 +638,15 @@ def build_parser() -> argparse.ArgumentParser:
         else:
             call.set_defaults(handler=cmd_service)
     demo = sub.add_parser('demo', help='disentangle against the mock iiwa (two processes)')
-    demo.add_argument('--scenario', default='demo_iiwa', help='scenario file or name')
+    demo.add_argument('--scenario', help='physics scene (config/scenes/; default demo_hook) '
+                      'or, with --engine kinematic, scenario (config/scenarios/; default '
+                      'demo_iiwa): a file or a name')
+    demo.add_argument('--engine', choices=('physics', 'kinematic'), default='physics',
+                      help='the mock arm: MuJoCo in joint impedance, or the idealised one')
+    demo.add_argument('--sim-time', action='store_true',
+                      help='run the mock on simulated time (/clock) as fast as it can')
+    demo.add_argument('--plot', metavar='OUT.png',
+                      help='draw the scene with the flange path and the blocks of the run')
     demo.add_argument('--timeout', type=float, default=300.0, help='seconds for the run')
     demo.add_argument('--json', action='store_true',
                       help='print {"success", "paths", "failures", "replan_latency_s"}')
@@ -580,13 +707,21 @@ def build_parser() -> argparse.ArgumentParser:
     robot.add_argument('--runs', type=int, default=10, help='runs per scenario and method '
                        '(run r uses planner seed r)')
     robot.add_argument('--scenarios', default='robot_waste,robot_maze,robot_bunny',
-                       help='comma-separated scenario files or names')
+                       help='comma-separated scene files or names (config/scenes/; '
+                       'config/scenarios/ with --engine kinematic)')
+    robot.add_argument('--engine', choices=('physics', 'kinematic'), default='physics',
+                       help='the mock arm: MuJoCo in joint impedance, or the idealised one')
+    robot.add_argument('--sim-time', action=argparse.BooleanOptionalAction, default=True,
+                       help='run the mock on simulated time (/clock), faster than real time')
+    robot.add_argument('--real-time-factor', type=float, default=0.0,
+                       help='with --sim-time: speed over the wall clock; 0: as fast as the '
+                       'planner keeps up')
     robot.add_argument('--methods', default='epsilon:0.2,hard:0.01,probabilistic',
                        help='comma-separated probabilistic[:C_FAIL], hard:Y[:C_HARD], epsilon:X')
     robot.add_argument('--out', default='results/robot', help='directory of robot_runs.jsonl '
                        'and the bags; runs already there are skipped')
-    robot.add_argument('--velocity-scaling', type=float, default=1.0,
-                       help='of the planner (the mock; 0.2 is the default on a real arm)')
+    robot.add_argument('--velocity-scaling', type=float, default=0.2,
+                       help='of the planner (0.2, its default on the real arm)')
     robot.add_argument('--timeout', type=float, default=600.0, help='seconds per run')
     robot.add_argument('--json', action='store_true', help='print every run as JSON')
     robot.set_defaults(handler=cmd_experiment_robot)

@@ -37,7 +37,8 @@ from __future__ import annotations
 
 from collections import deque
 from dataclasses import dataclass, replace
-from typing import Protocol
+from pathlib import Path
+from typing import Protocol, TYPE_CHECKING
 
 import numpy as np
 from probdis_ros.model.arms import Arm
@@ -48,6 +49,9 @@ from probdis_ros.motion.jtc import (
     TrajectoryController,
 )
 from probdis_ros.sim.compliant_arm import CompliantArm
+
+if TYPE_CHECKING:
+    from probdis_ros.physics.scene import Scene
 
 
 class Engine(Protocol):
@@ -189,14 +193,15 @@ class SimulatedRobot:
 ENGINES = ('physics', 'kinematic')
 
 
-def build_robot(engine: str, world: str, settings: RobotSettings | None = None,
+def build_robot(engine: str, world: str | Path | Scene, settings: RobotSettings | None = None,
                 object_mass_error: float = 0.0) -> tuple[SimulatedRobot, str]:
     """
     Return a robot at the start of a world, and a line describing it.
 
-    world is a physics scene (file or name in config/scenes/) for ``physics``, a kinematic
-    scenario (file or name in config/scenarios/) for ``kinematic``.  The kinematic arm copies
-    the command as the first mock did, so it runs without the driver's filter.
+    world is a physics scene (a Scene, a file or a name in config/scenes/) for ``physics``,
+    a kinematic scenario (file or name in config/scenarios/) for ``kinematic``.  The
+    kinematic arm copies the command as the first mock did, so it runs without the driver's
+    filter.
     """
     settings = settings or RobotSettings()
     if engine == 'kinematic':
@@ -213,7 +218,7 @@ def build_robot(engine: str, world: str, settings: RobotSettings | None = None,
                        f'hidden obstacles')
     if engine == 'physics':
         from probdis_ros.physics import load_scene, PhysicsIiwa, PhysicsSettings
-        scene = load_scene(world)
+        scene = load_scene(world) if isinstance(world, (str, Path)) else world
         physics = PhysicsIiwa(scene, PhysicsSettings(object_mass_error=object_mass_error))
         robot = SimulatedRobot(physics, scene.start, settings)
         return robot, f'scene {scene.name} with {len(scene.obstacles)} hidden obstacles'

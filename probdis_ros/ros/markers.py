@@ -100,7 +100,7 @@ def scene_markers(scene, stamp) -> MarkerArray:
                            'cylinder': Marker.CYLINDER}[kind]
             marker.header.frame_id, marker.header.stamp = frame, stamp
             marker.pose.position = _point(position)
-            w, x, y, z = rotation_to_quaternion(np.asarray(rotation))
+            w, x, y, z = np.asarray(rotation_to_quaternion(np.asarray(rotation))).reshape(4)
             marker.pose.orientation.w, marker.pose.orientation.x = float(w), float(x)
             marker.pose.orientation.y, marker.pose.orientation.z = float(y), float(z)
             if kind == 'box':

@@ -1,0 +1,147 @@
+# Copyright 2026 probdis_ros contributors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+
+"""
+Figures of the physics mock that the detector is tuned on (``probdis bench physics``).
+
+* real-time factor: simulated over wall-clock seconds, for the arm alone (MuJoCo holding a
+  setpoint) and for the whole command path (JTC, the driver's filter, the arm);
+* free-motion tracking: the L1 gap between what JTC commands (as the planner's detector
+  computes it) and where the arm is, during a motion and after it settles, at a velocity
+  scaling;
+* a block: the demo scene's straight path into its obstacle, from the first contact to the
+  detector's verdict: the delay, the gap and the contact force then, and how far the flange
+  moved between contact and detection (what makes "the segment nearest at detection" late).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+import time
+
+import numpy as np
+from probdis_ros.model import iiwa_arm
+from probdis_ros.motion.detector import BlockDetector, DetectorSettings, Verdict
+from probdis_ros.motion.jtc import JtcTrajectory
+from probdis_ros.motion.timing import time_path
+from probdis_ros.physics.scene import load_scene
+from probdis_ros.physics.simulated_robot import build_robot, RobotSettings
+
+
+def real_time_factor(scene: str = 'demo_hook', seconds: float = 5.0) -> dict:
+    """Return simulated / wall seconds for the arm alone and for the whole command path."""
+    robot, _ = build_robot('physics', scene)
+    engine = robot.engine
+    hold = engine.q.copy()
+    steps = round(seconds / robot.settings.period)
+    t0 = time.perf_counter()
+    for _ in range(steps):
+        engine.advance(hold, robot.settings.period)
+    arm_alone = seconds / (time.perf_counter() - t0)
+    t0 = time.perf_counter()
+    for _ in range(steps):
+        robot.step()
+    return {'arm_alone': arm_alone, 'command_path': seconds / (time.perf_counter() - t0),
+            'timestep_s': engine.settings.timestep}
+
+
+def _drive(robot, command, settings: DetectorSettings, limit: float,
+           on_step: Callable[[BlockDetector], None] | None = None
+           ) -> tuple[BlockDetector, Verdict]:
+    """Send command and step until the detector's verdict (or limit seconds)."""
+    state = robot.joint_state()
+    robot.command(command)
+    detector = BlockDetector(JtcTrajectory(command, state.position, state.velocity),
+                             robot.time, settings)
+    end = robot.time + limit
+    verdict = Verdict.MOVING
+    while verdict is Verdict.MOVING and robot.time < end:
+        robot.step()
+        reported = robot.joint_state()
+        verdict = detector.update(reported.time, reported.position)
+        if on_step is not None:
+            on_step(detector)
+    return detector, verdict
+
+
+@dataclass
+class Tracking:
+    """Free-motion tracking at one velocity scaling."""
+
+    velocity_scaling: float
+    peak_gap: float          # largest L1 gap during the motion [rad]
+    final_gap: float         # L1 gap when the detector said done [rad]
+    verdict: str
+    settle_s: float          # from the planned end to the verdict [s]
+
+
+def free_tracking(velocity_scaling: float, scene: str = 'demo_hook',
+                  robot_settings: RobotSettings | None = None) -> Tracking:
+    """Drive the scene's start -> goal with its obstacles removed; return the gaps."""
+    free = replace(load_scene(scene), obstacles=())
+    robot, _ = build_robot('physics', free, robot_settings)
+    start = robot.joint_state().position
+    goal = robot.engine.scene.goal
+    timed = time_path(np.array([start, goal]), iiwa_arm().velocity_limits, velocity_scaling)
+    t_start = robot.time
+    gaps = []
+    detector, verdict = _drive(robot, timed.command(), DetectorSettings(),
+                               timed.duration + 5.0, lambda d: gaps.append(d.gap))
+    peak = max(gaps, default=0.0)
+    return Tracking(velocity_scaling, peak, detector.gap, verdict.value,
+                    robot.time - t_start - timed.duration)
+
+
+@dataclass
+class BlockFigures:
+    """The demo scene's straight path into its obstacle."""
+
+    verdict: str
+    contact_s: float | None          # first contact after the command [s]
+    detected_s: float | None         # the detector's verdict after the command [s]
+    planned_s: float                 # the command's duration [s]
+    gap_at_detection: float          # L1 [rad]
+    peak_force_n: float              # largest summed normal force before detection [N]
+    force_at_detection_n: float
+    flange_moved_m: float            # from the first contact to detection [m]
+
+
+def straight_block(scene: str = 'demo_hook', velocity_scaling: float = 0.2,
+                   robot_settings: RobotSettings | None = None) -> BlockFigures:
+    """Command the scene's straight start -> goal path and measure the block."""
+    robot, _ = build_robot('physics', scene, robot_settings)
+    start = robot.joint_state().position
+    timed = time_path(np.array([start, robot.engine.scene.goal]), iiwa_arm().velocity_limits,
+                      velocity_scaling)
+    t0 = robot.time
+    seen = {'contact_t': None, 'contact_x': None, 'peak': 0.0, 'force': 0.0}
+
+    def watch(_: BlockDetector) -> None:
+        force = sum(c.force for c in robot.engine.contacts())
+        seen['force'], seen['peak'] = force, max(seen['peak'], force)
+        if force > 0 and seen['contact_t'] is None:
+            seen['contact_t'] = robot.time - t0
+            seen['contact_x'] = robot.engine.flange_pose()[0]
+
+    detector, verdict = _drive(robot, timed.command(), DetectorSettings(),
+                               timed.duration + 5.0, watch)
+    contact_t, contact_x = seen['contact_t'], seen['contact_x']
+    peak, force = seen['peak'], seen['force']
+    detected = robot.time - t0 if verdict is Verdict.BLOCKED else None
+    moved = 0.0 if contact_x is None else float(
+        np.linalg.norm(robot.engine.flange_pose()[0] - contact_x))
+    return BlockFigures(verdict.value, contact_t, detected, timed.duration, detector.gap,
+                        peak, force, moved)
