@@ -38,7 +38,7 @@ $(STAMP): $(REQUIREMENTS) setup.py package.xml
 # The main job: disentangle the default scenario, mock iiwa and planner as two processes.
 demo: venv
 	@mkdir -p $(OUT)
-	$(VENV)/bin/probdis demo
+	$(VENV)/bin/probdis demo --plot $(OUT)/demo.png
 
 lint: venv
 	$(PY) -m ruff check probdis_ros test setup.py config/launch

@@ -70,8 +70,10 @@ def test_service_commands_against_a_running_planner(env, tmp_path):
 
 def test_demo_disentangles_through_two_processes_and_its_bag_replays_the_same(env, tmp_path):
     env['ROS_HOME'] = str(tmp_path)              # where the planner records its bags
-    result = run(env, 'demo', '--json', timeout=400)
+    picture = tmp_path / 'demo.png'
+    result = run(env, 'demo', '--json', '--plot', str(picture), timeout=400)
     assert result.returncode == 0, result.stderr[-2000:]
+    assert picture.stat().st_size > 10_000          # the scene, the flange path, the blocks
     doc = json.loads(result.stdout.strip().splitlines()[-1])
     assert list(doc) == ['success', 'paths', 'failures', 'replan_latency_s']
     assert doc['success'] is True
@@ -108,4 +110,4 @@ def test_robot_experiment_runs_through_the_nodes_and_resumes(env, tmp_path):
     assert again.stdout == first.stdout
     assert len((out / 'robot_runs.jsonl').read_text().splitlines()) == 2
     refused = run(env, 'experiment', 'robot', '--scenarios', 'no_such_world', '--out', str(out))
-    assert refused.returncode == 2 and "no scenario file 'no_such_world'" in refused.stderr
+    assert refused.returncode == 2 and "no scene file 'no_such_world'" in refused.stderr

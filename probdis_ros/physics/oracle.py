@@ -1,0 +1,161 @@
+# Copyright 2026 probdis_ros contributors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+A planner that sees the scene: it decides whether a physical scene is solvable at all.
+
+RRT-Connect in joint space; a configuration is free if the arm and the grasped object do
+not penetrate the scene with its clutter at rest (:meth:`PhysicsIiwa.in_collision`), and a
+straight joint-space segment is free if its configurations are at most ``resolution`` rad
+apart on every joint.  A scene is kept only if this finds a way out, so that a run that
+fails measures the disentangling method and not an impossible scene.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+import itertools
+
+import numpy as np
+from probdis_ros.physics.arm import PhysicsIiwa
+
+DEFAULT_RESOLUTION = 0.02   # rad, per joint, between checked configurations
+
+
+def segment_configurations(a: np.ndarray, b: np.ndarray,
+                           resolution: float = DEFAULT_RESOLUTION) -> np.ndarray:
+    """Return configurations from a to b (both included) at most resolution apart per joint."""
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    n = max(1, int(np.ceil(np.abs(b - a).max() / resolution)))
+    return a + (b - a) * np.linspace(0.0, 1.0, n + 1)[:, None]
+
+
+def first_collision(arm: PhysicsIiwa, path: np.ndarray,
+                    resolution: float = DEFAULT_RESOLUTION,
+                    clearance: float = 0.0) -> np.ndarray | None:
+    """Return the first configuration along a joint path that collides, or None if free."""
+    path = np.atleast_2d(np.asarray(path, dtype=float))
+    if arm.in_collision(path[0], clearance):
+        return path[0]
+    for a, b in itertools.pairwise(path):
+        for q in segment_configurations(a, b, resolution)[1:]:
+            if arm.in_collision(q, clearance):
+                return q
+    return None
+
+
+def path_is_free(arm: PhysicsIiwa, path: np.ndarray, resolution: float = DEFAULT_RESOLUTION,
+                 clearance: float = 0.0) -> bool:
+    """Tell whether a joint path (its straight segments) is collision-free."""
+    return first_collision(arm, path, resolution, clearance) is None
+
+
+class _Tree:
+    def __init__(self, root: np.ndarray) -> None:
+        self.nodes = [root.copy()]
+        self.parents = [-1]
+
+    def nearest(self, q: np.ndarray) -> int:
+        return int(np.argmin(((np.asarray(self.nodes) - q) ** 2).sum(axis=1)))
+
+    def add(self, q: np.ndarray, parent: int) -> int:
+        self.nodes.append(q)
+        self.parents.append(parent)
+        return len(self.nodes) - 1
+
+    def chain(self, index: int) -> list[np.ndarray]:
+        out = []
+        while index >= 0:
+            out.append(self.nodes[index])
+            index = self.parents[index]
+        return out
+
+
+def find_free_path(arm: PhysicsIiwa, start: np.ndarray, goal: np.ndarray,
+                   rng: np.random.Generator, iterations: int = 3000, step: float = 0.3,
+                   resolution: float = DEFAULT_RESOLUTION, clearance: float = 0.0,
+                   limit_margin: float = 0.05, local_share: float = 0.7,
+                   local_spread: float = 0.2, attempts: int = 3) -> np.ndarray | None:
+    """
+    Return a collision-free joint path from start to goal, or None within the budget.
+
+    Samples stay ``limit_margin`` rad inside the joint limits.  A share ``local_share`` of
+    them is drawn around a random node of the growing tree (normal, ``local_spread`` rad per
+    joint): uniform samples alone rarely thread the narrow passages of an entanglement (a
+    slot, a hole) in 7 dimensions.  Up to ``attempts`` fresh pairs of trees of
+    ``iterations`` each (a tree stuck in a pocket is cheaper to drop than to grow).  Seeded by
+    ``rng``, so the same call gives the same path.
+    """
+    start, goal = np.asarray(start, dtype=float), np.asarray(goal, dtype=float)
+    if arm.in_collision(start, clearance) or arm.in_collision(goal, clearance):
+        return None
+    if path_is_free(arm, np.array([start, goal]), resolution, clearance):
+        return np.array([start, goal])
+    lower, upper = arm.lower + limit_margin, arm.upper - limit_margin
+
+    def extend(tree: _Tree, target: np.ndarray) -> tuple[str, int]:
+        near = tree.nearest(target)
+        delta = target - tree.nodes[near]
+        dist = float(np.linalg.norm(delta))
+        new = target if dist <= step else tree.nodes[near] + delta * (step / dist)
+        if not path_is_free(arm, np.array([tree.nodes[near], new]), resolution, clearance):
+            return 'trapped', near
+        return ('reached' if dist <= step else 'advanced'), tree.add(new, near)
+
+    for _ in range(attempts):
+        path = _connect(start, goal, rng, iterations, lower, upper, local_share,
+                        local_spread, extend)
+        if path is not None:
+            return shortcut(arm, path, rng, resolution, clearance)
+    return None
+
+
+def _connect(start: np.ndarray, goal: np.ndarray, rng: np.random.Generator, iterations: int,
+             lower: np.ndarray, upper: np.ndarray, local_share: float, local_spread: float,
+             extend: Callable[[_Tree, np.ndarray], tuple[str, int]]) -> np.ndarray | None:
+    """One RRT-Connect run: two trees from start and goal until they meet."""
+    trees = (_Tree(start), _Tree(goal))
+    for i in range(iterations):
+        grow, other = (trees[0], trees[1]) if i % 2 == 0 else (trees[1], trees[0])
+        if rng.random() < local_share:
+            base = grow.nodes[int(rng.integers(len(grow.nodes)))]
+            target = np.clip(base + rng.normal(0.0, local_spread, base.shape), lower, upper)
+        else:
+            target = rng.uniform(lower, upper)
+        status, new = extend(grow, target)
+        if status == 'trapped':
+            continue
+        while True:
+            status, last = extend(other, grow.nodes[new])
+            if status != 'advanced':
+                break
+        if status == 'reached':
+            path = np.array(grow.chain(new)[::-1] + other.chain(last)[1:])
+            return path if i % 2 == 0 else path[::-1]
+    return None
+
+
+def shortcut(arm: PhysicsIiwa, path: np.ndarray, rng: np.random.Generator,
+             resolution: float = DEFAULT_RESOLUTION, clearance: float = 0.0,
+             tries: int = 50) -> np.ndarray:
+    """Shorten a free path by replacing stretches with free straight segments."""
+    path = list(np.asarray(path, dtype=float))
+    for _ in range(tries):
+        if len(path) <= 2:
+            break
+        i, j = sorted(rng.choice(len(path), size=2, replace=False))
+        if j - i > 1 and path_is_free(arm, np.array([path[i], path[j]]), resolution,
+                                      clearance):
+            path = path[:i + 1] + path[j:]
+    return np.array(path)
