@@ -26,6 +26,7 @@ import time
 
 import numpy as np
 from probdis_ros.model import FailureMap, iiwa_arm
+from probdis_ros.physics import load_scene
 from probdis_ros.resources import scenario_path
 from probdis_ros.ros.mock_iiwa_node import MockIiwa
 from probdis_ros.ros.planner_node import PlannerNode
@@ -51,7 +52,8 @@ def planner(ros, tmp_path, **params):
     """Start a planner node in-process (fast motions; nodes share one interpreter)."""
     params = {'velocity_scaling': 1.0, 'state_timeout': 2.0, 'bag_dir': str(tmp_path / 'bags'),
               **params}
-    overrides = [Parameter('goal', value=GOAL.tolist()),
+    goal = np.asarray(params.pop('goal', GOAL))
+    overrides = [Parameter('goal', value=goal.tolist()),
                  Parameter('map_file', value=str(tmp_path / 'map.json'))]
     overrides += [Parameter(k, value=v) for k, v in params.items()]
     return ros.add(PlannerNode(context=ros.context, parameter_overrides=overrides))
@@ -171,23 +173,23 @@ def test_joint_states_that_stop_arriving_stop_the_run(ros, tmp_path):
     assert 'stopped arriving' in ros.status['message']
 
 
-def test_a_full_run_against_the_mock_learns_and_persists_failures(ros, tmp_path):
-    node = planner(ros, tmp_path)
-    mock(ros)
+def test_a_full_run_against_the_physics_mock_learns_and_persists_failures(ros, tmp_path):
+    scene = load_scene('demo_hook')
+    node = planner(ros, tmp_path, goal=scene.goal, velocity_scaling=0.5)
+    ros.add(MockIiwa(context=ros.context, parameter_overrides=[
+        Parameter('engine', value='physics'), Parameter('scene', value='demo_hook')]))
     wait_for(lambda: ros.call('start').success, 20, 'start')
     wait_for(lambda: finished(ros), 120, 'the run to end')
     status = ros.status
     assert status['state'] == 'succeeded', status
     assert status['paths'] >= 2 and status['failures'] == status['paths'] - 1
     assert len(FailureMap.load(tmp_path / 'map.json')) == status['failures']
-    velocity = 0.2 * iiwa_arm().velocity_limits
     for _, msg in ros.trajectories:
         times = [p.time_from_start.sec + p.time_from_start.nanosec * 1e-9 for p in msg.points]
         assert all(b > a for a, b in itertools.pairwise(times))
         assert list(msg.points[-1].velocities) == [0.0] * 7
         assert list(msg.joint_names) == JOINTS
     assert all(node.arm.within_limits(q)[0] for q in ros.positions_commanded())
-    del velocity
 
 
 def test_stop_during_motion_holds_within_one_control_period(ros, tmp_path):

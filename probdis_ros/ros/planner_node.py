@@ -119,6 +119,9 @@ PARAMETERS = {
     'n_random': (100, _int('|C_RAND|: samples per RandomConfiguration', 1, 100000)),
     'p_goal': (0.1, _float('P_GOAL', 0.0, 1.0)),
     'step': (1.0, _float('longest new tree edge [rad]', 0.01, 10.0)),
+    # 0 until a budget is shown to disentangle better (README "Planning and simulation")
+    'plan_time': (0.0, _float('anytime budget [s]: the trees keep growing in rounds of K '
+                              'while it lasts; 0: one round of K (the paper)', 0.0, 60.0)),
     'seed': (0, _int('random seed of the planner', 0, 2**31 - 1)),
     'map_file': (default_map_file(), ParameterDescriptor(
         description='failure map file, written after every failure and read at start-up; '
@@ -345,7 +348,8 @@ class PlannerNode(Node):
             iterations=self.get_parameter('iterations').value,
             delta=self.get_parameter('delta').value,
             n_random=self.get_parameter('n_random').value,
-            p_goal=self.get_parameter('p_goal').value, step=self.get_parameter('step').value)
+            p_goal=self.get_parameter('p_goal').value, step=self.get_parameter('step').value,
+            plan_time=self.get_parameter('plan_time').value)
         method = Method.from_parameters(self.get_parameter('method').value,
                                         self.get_parameter('threshold').value,
                                         self.get_parameter('epsilon').value)
