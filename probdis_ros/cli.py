@@ -102,28 +102,57 @@ def cmd_bench_fk(args: argparse.Namespace) -> int:
 
 
 def cmd_experiment_sweep(args: argparse.Namespace) -> int:
-    """Run (or resume) a sweep of simulated episodes."""
-    from probdis_ros.experiments.sweep import episode_keys, progress_line, run_sweep, SETTINGS
+    """Run (or resume) a sweep of simulated episodes: the paper's settings or families."""
+    from probdis_ros.experiments.sweep import (
+        episode_keys,
+        family_keys,
+        progress_line,
+        run_sweep,
+        SETTINGS,
+    )
     from probdis_ros.planning.methods import Method
+    from probdis_ros.sim.families import FAMILIES
 
-    settings = _split(args.setting)
-    unknown = [s for s in settings if s not in SETTINGS]
-    if unknown:
-        raise UsageError(f'unknown setting {unknown[0]!r}; choose from {", ".join(SETTINGS)}')
-    try:
-        obstacles = [int(n) for n in _split(args.obstacles)]
-    except ValueError:
-        raise UsageError('--obstacles takes comma-separated integers, not '
-                         f'{args.obstacles!r}') from None
     methods = [Method.parse(m) for m in _split(args.methods)]
-    if args.worlds < 1 or args.max_paths < 1 or any(n < 0 for n in obstacles) or \
+    if args.worlds < 1 or args.max_paths < 1 or \
             (args.workers is not None and args.workers < 1):
-        raise UsageError('--worlds, --max-paths and --workers must be positive, obstacle '
-                         'counts not negative')
-    keys = episode_keys(settings, obstacles, args.worlds, methods, args.seed)
+        raise UsageError('--worlds, --max-paths and --workers must be positive')
+    if args.family is not None:
+        if args.setting is not None or args.obstacles is not None:
+            raise UsageError('--family runs entanglement families; it takes no --setting '
+                             'or --obstacles')
+        families = list(FAMILIES) if args.family == 'all' else _split(args.family)
+        unknown = [f for f in families if f not in FAMILIES]
+        if unknown or not families:
+            raise UsageError(f'unknown family {(unknown or [args.family])[0]!r}; choose from '
+                             f'{", ".join(FAMILIES)} or all')
+        keys = family_keys(families, args.worlds, methods, args.seed)
+    else:
+        settings = _split(args.setting or '2d,3d,3d-orient')
+        unknown = [s for s in settings if s not in SETTINGS]
+        if unknown:
+            raise UsageError(f'unknown setting {unknown[0]!r}; choose from '
+                             f'{", ".join(SETTINGS)}')
+        try:
+            obstacles = [int(n) for n in _split(args.obstacles or '1,10,30,50')]
+        except ValueError:
+            raise UsageError('--obstacles takes comma-separated integers, not '
+                             f'{args.obstacles!r}') from None
+        if any(n < 0 for n in obstacles):
+            raise UsageError('obstacle counts must not be negative')
+        keys = episode_keys(settings, obstacles, args.worlds, methods, args.seed)
+    rrt = {}
+    if args.iterations is not None:
+        if args.iterations < 1:
+            raise UsageError('--iterations must be positive')
+        rrt['iterations'] = args.iterations
+    if args.plan_time is not None:
+        if args.plan_time <= 0:
+            raise UsageError('--plan-time must be positive')
+        rrt['plan_time'] = args.plan_time
     progress = progress_line if sys.stderr.isatty() else None
     report = run_sweep(keys, Path(args.out), args.max_paths, args.scheduler, args.workers,
-                       progress)
+                       progress, rrt or None)
     print(f'{args.out}: {report.total} episodes, {report.skipped} already done, '
           f'{report.ran} run in {report.seconds:.0f} s')
     return 0
@@ -131,11 +160,11 @@ def cmd_experiment_sweep(args: argparse.Namespace) -> int:
 
 def cmd_experiment_report(args: argparse.Namespace) -> int:
     """Write the report of a sweep directory."""
-    from probdis_ros.experiments.report import markdown_table, write_report
+    from probdis_ros.experiments.report import markdown_tables, write_report
 
     summary = write_report(args.dir)
-    print(markdown_table(summary), end='')
-    print(f'wrote {args.dir}/success.png, sensitivity.png, summary.json, summary.md')
+    print(markdown_tables(summary), end='')
+    print(f'wrote {", ".join(summary["files"])} in {args.dir}')
     return 0
 
 
@@ -302,7 +331,9 @@ def cmd_bench_physics(args: argparse.Namespace) -> int:
               f'{detected} (planned end {b["planned_s"]:.2f} s); gap then '
               f'{b["gap_at_detection"]:.3f} rad, contact force '
               f'{b["force_at_detection_n"]:.0f} N (peak {b["peak_force_n"]:.0f} N); the flange '
-              f'moved {b["flange_moved_m"] * 100:.1f} cm from contact to detection')
+              f'moved {b["flange_moved_m"] * 100:.1f} cm from contact to detection ({b["reason"]})'
+              + ('' if b['onset_error_m'] is None else
+                 f'; the onset is {b["onset_error_m"] * 100:.1f} cm from the contact'))
     return 0
 
 
@@ -684,15 +715,25 @@ def build_parser() -> argparse.ArgumentParser:
     exp_sub = experiment.add_subparsers(dest='experiment_command', required=True,
                                         metavar='ACTION')
     sweep = exp_sub.add_parser('sweep', help='run simulated episodes on Dask, resumably')
-    sweep.add_argument('--setting', default='2d,3d,3d-orient',
-                       help='comma-separated settings (2d, 3d, 3d-orient)')
-    sweep.add_argument('--obstacles', default='1,10,30,50', help='comma-separated counts')
+    sweep.add_argument('--setting', help='comma-separated settings (2d, 3d, 3d-orient; '
+                       'default: all three)')
+    sweep.add_argument('--obstacles', help='comma-separated counts (default: 1,10,30,50)')
+    sweep.add_argument('--family', help='comma-separated entanglement families instead of '
+                       'the settings (open_box, closed_box, plate_hole, hook_bar, clutter; '
+                       'all): world w is the family world of seed SEED + w')
     sweep.add_argument('--methods',
                        default='probabilistic,hard:0.01,hard:0.02,epsilon:0.2,epsilon:0.4',
                        help='comma-separated probabilistic[:C_FAIL], hard:Y[:C_HARD], epsilon:X')
-    sweep.add_argument('--worlds', type=int, default=100, help='worlds per obstacle count')
+    sweep.add_argument('--worlds', type=int, default=100,
+                       help='worlds per obstacle count or family')
     sweep.add_argument('--max-paths', type=int, default=20, help='N_ITER of each episode')
-    sweep.add_argument('--seed', type=int, default=0, help='seed of the sweep (its worlds)')
+    sweep.add_argument('--iterations', type=int, help='K of the RRT planners (default: the '
+                       "paper's 100; an ablation, kept in each record)")
+    sweep.add_argument('--plan-time', type=float, help='anytime budget per plan [s]: more '
+                       'rounds of K while it lasts (default: one round; wall-clock, so not '
+                       'reproducible across machines)')
+    sweep.add_argument('--seed', type=int, default=0, help='seed of the sweep (its worlds; '
+                       'with --family the first world seed)')
     sweep.add_argument('--out', required=True, help='directory of episodes.jsonl')
     sweep.add_argument('--scheduler', help='address of a running Dask scheduler '
                        '(default: a LocalCluster on this machine)')

@@ -25,8 +25,19 @@ times are seconds on one clock, the host's (the DDS receive time or the node's s
 clock for the node, the simulated time offline).
 
 Phases: idle -> planning -> executing -> (blocked: retreating, while the next path is
-planned) -> ... -> succeeded | gave_up | stopped.  A command is checked against the joint
-limits before it is sent; whatever ends a run that is not at the goal holds the arm.
+planned) -> ... -> succeeded | gave_up | stopped.
+
+What it commands (:mod:`probdis_ros.motion.profiles`): every path and retreat keeps the
+planner's straight joint-space edges, jerk-limited within the velocity, acceleration and jerk
+limits, sent as 10 ms points with positions, velocities and accelerations that JTC runs as the
+planned profile; whatever ends a run that is not at the goal decelerates the arm to rest
+from its current state (never a jump, never toward a stale position).
+
+What it learns: a block is located where it began (the detector's onset: the arm touched
+the obstacle there and swung on while its unblocked joints followed the command); the
+retreat starts from where the arm is and goes back the way it came; a blocked retreat is a
+block too, and the next path is planned from where the arm is when the plan it was to run
+began elsewhere.  A driver that echoes the command instead of measuring stops the run.
 """
 
 from __future__ import annotations
@@ -38,9 +49,22 @@ from enum import Enum
 import numpy as np
 from probdis_ros.model.arms import Arm
 from probdis_ros.motion.detector import BlockDetector, DetectorSettings, Verdict
-from probdis_ros.motion.jtc import JtcTrajectory, TrajectoryCommand
-from probdis_ros.motion.timing import hold_command, nearest_segment, time_path
+from probdis_ros.motion.jtc import CONTROLLER_RATE, JtcTrajectory, TrajectoryCommand
+from probdis_ros.motion.profiles import (
+    DEFAULT_ACCELERATION,
+    DEFAULT_JERK,
+    Motion,
+    MotionLimits,
+    stop,
+    time_parameterize,
+)
 from probdis_ros.planning.disentangle import Disentangler, State
+
+#: What a run says when the joint states echo the command (README "Pointing it at the real arm").
+ECHO_MESSAGE = ('joint states follow the command with no lag: the driver reports the '
+                'commanded position, not the measured one, so no block could be seen. In the '
+                'lbr stack set open_loop: false for JOINT_IMPEDANCE_CONTROL (releases from '
+                'December 2024 do it themselves)')
 
 
 class Phase(str, Enum):
@@ -65,22 +89,28 @@ class RunSettings:
     """How a run drives the arm; every default in one place (the node declares these)."""
 
     velocity_scaling: float = 0.2
-    d_dist: float = 0.04
-    stall_time: float = 0.3
-    state_timeout: float = 0.5
+    acceleration_scaling: float = 1.0
+    acceleration_limit: float = DEFAULT_ACCELERATION   # rad/s^2, every joint (lbr MoveIt)
+    jerk_limit: float = DEFAULT_JERK                   # rad/s^3, every joint
+    state_timeout: float = 0.5                         # joint states older than this stop
+    replan_tolerance: float = 0.05                     # L1 [rad] between plan start and arm
+    detection: DetectorSettings = field(default_factory=DetectorSettings)
 
     def __post_init__(self) -> None:
         """Refuse values a run cannot use, naming them."""
-        if not 0.0 < self.velocity_scaling <= 1.0:
-            raise ValueError(f'velocity_scaling must be in (0, 1], got {self.velocity_scaling}')
-        for name in ('d_dist', 'stall_time', 'state_timeout'):
+        for name in ('velocity_scaling', 'acceleration_scaling'):
+            if not 0.0 < getattr(self, name) <= 1.0:
+                raise ValueError(f'{name} must be in (0, 1], got {getattr(self, name)}')
+        for name in ('acceleration_limit', 'jerk_limit', 'state_timeout', 'replan_tolerance'):
             if not getattr(self, name) > 0:
                 raise ValueError(f'{name} must be positive, got {getattr(self, name)}')
 
-    @property
-    def detector(self) -> DetectorSettings:
-        """Return the detector's thresholds."""
-        return DetectorSettings(d_dist=self.d_dist, stall_time=self.stall_time)
+    def limits(self, arm: Arm) -> MotionLimits:
+        """Return the motion limits: the arm's velocities, these accelerations and scalings."""
+        return MotionLimits(velocity=arm.velocity_limits, acceleration=self.acceleration_limit,
+                            jerk=self.jerk_limit, velocity_scaling=self.velocity_scaling,
+                            acceleration_scaling=self.acceleration_scaling,
+                            lower=arm.lower, upper=arm.upper)
 
 
 @dataclass(frozen=True)
@@ -123,16 +153,19 @@ class Run:
         """Start idle."""
         self.phase = Phase.IDLE
         self.actions: list = []
+        self.limits = self.settings.limits(self.arm)
+        self.period = 1.0 / CONTROLLER_RATE
         self.measured: np.ndarray | None = None
         self.measured_velocity: np.ndarray | None = None
         self.measured_at = -np.inf
         self.detector: BlockDetector | None = None
+        self.trajectory: JtcTrajectory | None = None     # the last command, as JTC runs it
+        self.motion: Motion | None = None                # the path or retreat being run
         self.plan_pending = False
         self.pending_path: np.ndarray | None = None
         self.block_time: float | None = None
         self.retreat_sent = 0.0
         self.retreat_done_at: float | None = None
-        self.hold_on_next_state = False
         self.latencies: list[float] = []
         self.outcome = ''
         self.message = 'ready'
@@ -154,21 +187,22 @@ class Run:
         self._now = now
         self.measured, self.measured_at = np.asarray(config, dtype=float), now
         self.measured_velocity = velocity
-        if self.hold_on_next_state:
-            self._hold()
-            self.hold_on_next_state = False
         if self.detector is None or not self.phase.active:
             return
         verdict = self.detector.update(now, self.measured)
         if verdict is Verdict.MOVING:
             return
-        self.detector = None
-        if self.phase is Phase.EXECUTING:
+        detector, self.detector = self.detector, None
+        if verdict is Verdict.ECHO:
+            self.finish(State.STOPPED, ECHO_MESSAGE)
+        elif self.phase is Phase.EXECUTING:
             if verdict is Verdict.DONE:
                 self._completed(self.measured)
             else:
-                self._blocked(self.measured, now)
+                self._blocked(detector, now)
         elif self.phase is Phase.RETREATING:
+            if verdict is Verdict.BLOCKED:
+                self._retreat_blocked(detector, now)
             self.retreat_done_at = now
             self._send_pending()
 
@@ -198,9 +232,9 @@ class Run:
                                        f'(state_timeout)')
 
     def stop(self, reason: str = 'stopped on request') -> None:
-        """End the run now and hold (or just hold when no run is active)."""
+        """End the run now, decelerating the arm to rest (or hold it where it is)."""
         if not self.phase.active:
-            self._hold()
+            self._stop_arm()
             return
         self.finish(State.STOPPED, reason)
 
@@ -236,27 +270,38 @@ class Run:
         if self.pending_path is None or not self._arm_ready():
             return
         path, self.pending_path = self.pending_path, None
+        if np.abs(path[0] - self.measured).sum() > self.settings.replan_tolerance:
+            # the arm is not where this plan begins (its retreat was blocked): a first edge
+            # from here would be uncosted, so plan again from where the arm is
+            self.loop.withdraw()
+            self.plan_pending = True
+            self.phase = Phase.PLANNING
+            self._emit(PlanFrom(self.measured.copy()))
+            return
         path[0] = self.measured
         if not self.arm.within_limits(path).all():
             self.finish(State.STOPPED, 'planned path leaves the joint limits; not sent')
             return
-        timed = time_path(path, self.arm.velocity_limits, self.settings.velocity_scaling)
+        motion = time_parameterize(path, self.limits)
         now = self._time()
         if self.block_time is not None:
             waited = (self.retreat_sent - self.block_time) + max(
                 0.0, now - (self.retreat_done_at or now))
             self.latencies.append(waited)
             self.block_time = None
-        self._send(timed.command(), path)
+        self._send(motion, path)
         self.phase = Phase.EXECUTING
         self.retreat_done_at = None
         self._emit(StatusChanged())
 
-    def _send(self, command: TrajectoryCommand, path: np.ndarray | None = None) -> None:
-        """Send a command and watch it as JTC runs it, from the measured state now."""
+    def _send(self, motion: Motion, path: np.ndarray | None = None) -> None:
+        """Send a motion and watch it as JTC runs it, from the measured state now."""
+        command = motion.command
         self._emit(Send(command, path))
-        trajectory = JtcTrajectory(command, self.measured, self.measured_velocity)
-        self.detector = BlockDetector(trajectory, self._time(), self.settings.detector)
+        now = self._time()
+        self.motion = motion
+        self.trajectory = JtcTrajectory(command, self.measured, self.measured_velocity, now)
+        self.detector = BlockDetector(self.trajectory, now, self.settings.detection)
 
     def _completed(self, config: np.ndarray) -> None:
         self.loop.report_completed(config)
@@ -266,33 +311,59 @@ class Run:
         else:
             self._plan_from(config)
 
-    def _blocked(self, config: np.ndarray, now: float) -> None:
+    def _onset(self, detector: BlockDetector, now: float) -> tuple[np.ndarray, int]:
+        """Return where the block began and the edge of the running motion it began on."""
+        onset = detector.onset
+        config, when = (onset.config, onset.time) if onset is not None else \
+            (self.measured, now)
+        elapsed = when - self.trajectory.taken_at - self.settings.detection.motion_delay
+        return config.copy(), self.motion.segment_at(max(elapsed, 0.0))
+
+    def _blocked(self, detector: BlockDetector, now: float) -> None:
+        config, segment = self._onset(detector, now)
         path = self.loop.attempts[-1].path
-        segment = nearest_segment(path, config)
-        retreat = self.loop.report_blocked(config, segment)
+        segment = int(np.clip(segment, 0, len(path) - 2))
+        back = self.loop.report_blocked(config, segment)
         fmap = self.loop.fmap
         self._emit(Learned({'t': now, 'x': fmap.points[-1].tolist(),
                             'v': fmap.directions[-1].tolist(),
-                            'q': fmap.orientations[-1].tolist(), 'segment': segment}))
+                            'q': fmap.orientations[-1].tolist(), 'segment': segment,
+                            'config': config.tolist(), 'why': detector.reason}))
         self.block_time = now
-        timed = time_path(retreat, self.arm.velocity_limits, self.settings.velocity_scaling)
-        self._send(timed.command())
+        # from where the arm is, through where the block began, back the way it came
+        retreat = np.vstack([self.measured, back])
+        self._send(time_parameterize(retreat, self.limits))
         self.retreat_sent = self._time()
         self.phase = Phase.RETREATING
         self.retreat_done_at = None
-        self.message = (f'blocked on segment {segment}: failure {len(fmap)} recorded, '
-                        f'retreating and replanning')
+        self.message = (f'blocked on segment {segment} ({detector.reason}): failure '
+                        f'{len(fmap)} recorded, retreating and replanning')
         # plan the next path from the retreat target while the arm moves back
-        self.loop.report_retreated(retreat[-1])
+        self.loop.report_retreated(back[-1])
         if self.loop.state.finished:
             self.finish(self.loop.state, 'max_paths reached')
             return
         self.plan_pending = True
-        self._emit(PlanFrom(retreat[-1].copy()))
+        self._emit(PlanFrom(back[-1].copy()))
         self._emit(StatusChanged())
 
+    def _retreat_blocked(self, detector: BlockDetector, now: float) -> None:
+        """A retreat was blocked: learn it like any block; the next plan starts here."""
+        config, segment = self._onset(detector, now)
+        via = self.motion.positions[np.searchsorted(self.motion.times,
+                                                    self.motion.via_times)]
+        segment = int(np.clip(segment, 0, len(via) - 2))
+        self.loop.learn(config, via[segment + 1] - via[segment])
+        fmap = self.loop.fmap
+        self._emit(Learned({'t': now, 'x': fmap.points[-1].tolist(),
+                            'v': fmap.directions[-1].tolist(),
+                            'q': fmap.orientations[-1].tolist(), 'segment': -1,
+                            'config': config.tolist(), 'why': f'retreat: {detector.reason}'}))
+        self.message = (f'retreat blocked ({detector.reason}): failure {len(fmap)} recorded, '
+                        f'replanning from where the arm is')
+
     def finish(self, state: State, message: str) -> None:
-        """End the run: a plan still pending is dropped, the arm holds unless at goal."""
+        """End the run: a plan still pending is dropped, the arm comes to rest unless at goal."""
         if state is State.STOPPED:
             self.loop.stop()
         self.outcome = state.value
@@ -302,13 +373,31 @@ class Run:
         self.message = message
         self.phase = Phase(state.value)
         if state is not State.SUCCEEDED:
-            self._hold()
-            self.hold_on_next_state = True
+            self._stop_arm()
         self._emit(StatusChanged())
 
-    def _hold(self) -> None:
-        if self.measured is not None:
-            self._emit(Send(hold_command(self.measured)))
+    def _stop_arm(self) -> None:
+        """
+        Decelerate to rest from the arm's state now, within the limits.
+
+        JTC starts any new command from the measured state, so the stop starts there while
+        the joint states are fresh (younger than state_timeout); when they are not, from where
+        the running command has taken the arm by now (the command motion_delay ago), never
+        from a stale position.
+        """
+        now = self._time()
+        fresh = now - self.measured_at <= self.settings.state_timeout
+        if self.trajectory is not None and not fresh:
+            t = now - self.trajectory.taken_at - self.settings.detection.motion_delay
+            q, v, a = self.trajectory.sample(t)
+        elif self.measured is not None:
+            q = self.measured
+            v = self.measured_velocity if self.measured_velocity is not None else 0 * q
+            a = 0 * q
+        else:
+            return
+        q = np.clip(q, self.arm.lower, self.arm.upper)
+        self._emit(Send(stop(q, v, a, self.limits).command))
 
     def status(self) -> dict:
         """Return the run's part of the status document."""

@@ -174,15 +174,18 @@ def test_joint_states_that_stop_arriving_stop_the_run(ros, tmp_path):
 
 
 def test_a_full_run_against_the_physics_mock_learns_and_persists_failures(ros, tmp_path):
+    # on simulated time: the planner follows the mock's /clock, so a busy machine slows the
+    # run down instead of making the arm look late
     scene = load_scene('demo_hook')
-    node = planner(ros, tmp_path, goal=scene.goal, velocity_scaling=0.5)
+    node = planner(ros, tmp_path, goal=scene.goal, velocity_scaling=0.5, use_sim_time=True)
     ros.add(MockIiwa(context=ros.context, parameter_overrides=[
-        Parameter('engine', value='physics'), Parameter('scene', value='demo_hook')]))
+        Parameter('engine', value='physics'), Parameter('scene', value='demo_hook'),
+        Parameter('sim_time', value=True), Parameter('real_time_factor', value=0.0)]))
     wait_for(lambda: ros.call('start').success, 20, 'start')
     wait_for(lambda: finished(ros), 120, 'the run to end')
     status = ros.status
     assert status['state'] == 'succeeded', status
-    assert status['paths'] >= 2 and status['failures'] == status['paths'] - 1
+    assert status['paths'] >= 2 and status['failures'] >= 1
     assert len(FailureMap.load(tmp_path / 'map.json')) == status['failures']
     for _, msg in ros.trajectories:
         times = [p.time_from_start.sec + p.time_from_start.nanosec * 1e-9 for p in msg.points]
@@ -192,30 +195,33 @@ def test_a_full_run_against_the_physics_mock_learns_and_persists_failures(ros, t
     assert all(node.arm.within_limits(q)[0] for q in ros.positions_commanded())
 
 
-def test_stop_during_motion_holds_within_one_control_period(ros, tmp_path):
+def test_stop_during_motion_decelerates_to_rest_within_the_limits(ros, tmp_path):
     planner(ros, tmp_path)
-    arm = mock(ros)
+    arm = mock(ros, free_scenario(tmp_path))
     wait_for(lambda: ros.call('start').success, 20, 'start')
     wait_for(lambda: ros.status.get('state') == 'executing', 20, 'motion')
     time.sleep(0.3)
-    asked = time.monotonic()
-    response = ros.call('stop')
-    assert response.success
-    wait_for(lambda: len(ros.trajectories[-1][1].points) == 1, 1, 'a hold command')
-    first_hold = np.array(ros.trajectories[-1][1].points[0].positions)
-    time.sleep(0.1)     # the mock reaches the hold within a control period or two
-    hold = np.array(ros.trajectories[-1][1].points[0].positions)
+    count = len(ros.trajectories)
+    assert ros.call('stop').success
+    wait_for(lambda: ros.status.get('state') == 'stopped', 2, 'the stop')
+    stops = ros.trajectories[count:]
+    assert len(stops) == 1, 'one command: the stop'
+    points = stops[0][1].points
+    times = np.array([p.time_from_start.sec + p.time_from_start.nanosec * 1e-9 for p in points])
+    positions = np.array([p.positions for p in points])
+    velocities = np.array([p.velocities for p in points])
+    accelerations = np.array([p.accelerations for p in points])
+    # a deceleration, not a jump: sampled every 10 ms, within the acceleration limit, at rest
+    assert len(points) > 1 and np.allclose(np.diff(times), 0.01)
+    assert np.abs(accelerations).max() <= 10.0 * 1.01
+    assert np.abs(velocities[0]).max() > 0.0 and np.allclose(velocities[-1], 0.0)
+    assert np.abs(np.diff(positions, axis=0)).max() <= 0.01 * iiwa_arm().velocity_limits.max()
+    time.sleep(times[-1] + 0.3)
+    np.testing.assert_allclose(arm.q, positions[-1], atol=0.01)
     held = np.array(arm.q)
-    np.testing.assert_allclose(held, hold, atol=1e-9)
-    # the hold is repeated at the next joint state: the arm went on for one period at most
-    period = 1.0 / 100.0
-    assert np.all(np.abs(hold - first_hold) <= 1.5 * period * iiwa_arm().velocity_limits)
-    time.sleep(0.5)
-    np.testing.assert_allclose(arm.q, held, atol=1e-9)
+    time.sleep(0.3)
+    np.testing.assert_allclose(arm.q, held, atol=1e-4)     # the driver filter settling
     assert ros.status['state'] == 'stopped'
-    # a hold at once, and again at the next joint state
-    holds = [t for t, msg in ros.trajectories if len(msg.points) == 1 and t >= asked]
-    assert len(holds) >= 2
 
 
 def test_stop_during_planning_sends_no_path(ros, tmp_path):
@@ -252,7 +258,8 @@ def test_joint_state_noise_gives_no_false_blocks(ros, tmp_path):
 
 def test_the_planner_keeps_up_with_joint_states_at_1khz(ros, tmp_path):
     """The mock runs in its own process at 1 kHz; the planner must not fall behind."""
-    node = planner(ros, tmp_path, state_timeout=0.5)
+    # the kinematic arm lags its command by the driver's filter alone (0.04 s)
+    node = planner(ros, tmp_path, state_timeout=0.5, motion_delay=0.04)
     arm = mock_process(ros, 'rate:=1000.0')
     ages = []
     ros.probe.create_timer(0.02, lambda: node.measured is not None and ages.append(

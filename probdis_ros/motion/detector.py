@@ -13,18 +13,29 @@
 # limitations under the License.
 
 """
-The blocked-motion detector (the paper's test), shared by the planner node and replay.
+The blocked-motion detector (the paper's test, and what a compliant arm needs beside it).
 
-While a trajectory runs, the detector compares where the arm should be (the commanded
-trajectory interpolated at the current time) with where it is.  The motion is
+While a trajectory runs, the detector compares where the controller commands the arm (the
+command as JTC runs it, :mod:`probdis_ros.motion.jtc`, ``motion_delay`` earlier: an arm in
+joint impedance follows its command with a lag) with where it is.  The L1 gap
+``sum_j |desired_j - actual_j|`` decides:
 
-* **blocked** when the L1 gap ``sum_j |desired_j - actual_j|`` exceeds ``d_dist`` and the arm
-  has stalled (moved less than ``stall_motion`` (L1) over the last ``stall_time`` seconds)
-  or the trajectory has ended ``settle_time`` ago;
-* **done** when the trajectory has ended and the gap to its last point is at most
-  ``d_dist``.
+* **blocked** when the gap exceeds ``d_dist`` and the arm has stalled (moved less than
+  ``stall_motion`` (L1) over the last ``stall_time`` seconds) or the trajectory ended
+  ``settle_time`` ago (the paper's test); or at once when the gap exceeds ``gap_ceiling`` in
+  total or ``joint_gap_ceiling`` at one joint: with joint stiffness K the arm then presses
+  with about K x gap, and a compliant arm whose unblocked joints keep moving may never stall
+  before the trajectory ends (DESIGN.md "Facts: a physics-simulated iiwa");
+* **done** when the trajectory has ended and the gap to its last point is at most ``d_dist``;
+* **echo** when the measured positions have followed the moving command with no lag at all
+  for ``echo_time`` seconds: no arm in joint impedance does that, a driver that reports the
+  commanded position (the lbr stack's ``open_loop``) does, and it would hide every block.
 
-No rclpy: it takes plain times (seconds) and configurations.
+The ceilings and ``onset_gap`` grow by ``speed_allowance`` x the commanded speed (per joint,
+or L1): the lag that remains in fast free motion.  The **onset** of a block is where the gap
+last began to rise before it crossed that threshold: the arm touched the obstacle there,
+earlier than where it is when the block is declared (it swings and slides on while the
+unblocked joints follow the command).  No rclpy: plain seconds and arrays.
 """
 
 from __future__ import annotations
@@ -34,7 +45,9 @@ from dataclasses import dataclass
 from enum import Enum
 
 import numpy as np
-from probdis_ros.motion.timing import TimedPath
+
+#: The span over which the gap's growth is judged when tracing a block back to its onset [s].
+RISE_WINDOW = 0.1
 
 
 class Verdict(str, Enum):
@@ -43,51 +56,164 @@ class Verdict(str, Enum):
     MOVING = 'moving'
     DONE = 'done'
     BLOCKED = 'blocked'
+    ECHO = 'echo'
 
 
 @dataclass
 class DetectorSettings:
-    """Thresholds of the detector; d_dist is the paper's (L1 over joints, rad)."""
+    """Thresholds of the detector; every default in one place (README "Detection")."""
 
-    d_dist: float = 0.04
-    stall_time: float = 0.3
-    stall_motion: float = 0.005
-    settle_time: float = 0.5
+    d_dist: float = 0.1             # the paper's d_DIST: L1 gap of a blocked motion [rad]
+    stall_time: float = 0.3         # without progress for this long counts as stalled [s]
+    stall_motion: float = 0.005     # L1 motion over stall_time below which it is stalled [rad]
+    settle_time: float = 0.5        # after the end, the gap must close within this [s]
+    motion_delay: float = 0.1       # how far the arm lags its command [s]
+    gap_ceiling: float = 0.3        # L1 gap that is a block at once [rad]; 0: off
+    joint_gap_ceiling: float = 0.15  # one joint's gap that is a block at once [rad]; 0: off
+    onset_gap: float = 0.06         # the block began where the gap last rose above this [rad]
+    speed_allowance: float = 0.1    # ceilings and onset_gap grow by this x commanded speed [s]
+    onset_window: float = 1.0       # the rise is traced back at most this far [s]
+    onset_rate: float = 0.1         # L1 gap growth [rad/s] over 0.1 s that is still a rise
+    echo_time: float = 0.5          # seconds of lag-free motion that reveal an echo; 0: off
+    echo_speed: float = 0.05        # commanded L1 speed [rad/s] that counts as moving
+
+    def __post_init__(self) -> None:
+        """Refuse thresholds that cannot work, naming them."""
+        for name in ('d_dist', 'stall_time', 'stall_motion', 'settle_time', 'onset_gap',
+                     'echo_speed', 'onset_window', 'onset_rate'):
+            if not getattr(self, name) > 0:
+                raise ValueError(f'{name} must be positive, got {getattr(self, name)}')
+        for name in ('motion_delay', 'gap_ceiling', 'joint_gap_ceiling', 'echo_time',
+                     'speed_allowance'):
+            if not getattr(self, name) >= 0:
+                raise ValueError(f'{name} must be >= 0, got {getattr(self, name)}')
+        if 0 < self.gap_ceiling <= self.d_dist:
+            raise ValueError(f'gap_ceiling {self.gap_ceiling} must exceed d_dist {self.d_dist}')
+
+
+@dataclass(frozen=True)
+class Onset:
+    """Where a block began: the time, the measured configuration, the commanded velocity."""
+
+    time: float
+    config: np.ndarray
+    velocity: np.ndarray
 
 
 class BlockDetector:
-    """Watches one trajectory: feed it (time, measured configuration) samples."""
+    """
+    Watches one trajectory: feed it (time, measured configuration) samples.
 
-    def __init__(self, path: TimedPath, start_time: float,
-                 settings: DetectorSettings | None = None) -> None:
+    ``path`` is anything with ``at(t)`` / ``sample(t)`` and ``duration`` in seconds from
+    ``start_time`` (a :class:`~probdis_ros.motion.jtc.JtcTrajectory`).
+    """
+
+    def __init__(self, path, start_time: float, settings: DetectorSettings | None = None
+                 ) -> None:
         self.path = path
         self.start_time = start_time
         self.settings = settings or DetectorSettings()
         self._history: deque[tuple[float, np.ndarray]] = deque()
+        self._rising: tuple[float, np.ndarray, np.ndarray] | None = None
+        self._recent: deque[tuple[float, float, np.ndarray, np.ndarray]] = deque()
+        self._echo_since: float | None = None
         self.gap = 0.0
+        self.joint_gaps = np.zeros(0)
+        self.onset: Onset | None = None
+        self.reason = ''
+
+    def _desired(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """Return the commanded position the arm should be at t, and the command's velocity."""
+        q, v, _ = self.path.sample(t - self.settings.motion_delay)
+        return q, v
 
     def update(self, now: float, measured: np.ndarray) -> Verdict:
         """Return the verdict after a new measurement at time now [s]."""
         s = self.settings
         t = now - self.start_time
-        desired = self.path.at(t)
-        self.gap = float(np.abs(desired - measured).sum())
-        self._history.append((now, np.asarray(measured, dtype=float).copy()))
+        measured = np.asarray(measured, dtype=float)
+        desired, velocity = self._desired(t)
+        self.joint_gaps = np.abs(desired - measured)
+        self.gap = float(self.joint_gaps.sum())
+        allowance = s.speed_allowance * np.abs(velocity)
+        self._track_onset(now, measured, velocity, s.onset_gap + float(allowance.sum()))
+        self._history.append((now, measured.copy()))
         while self._history and self._history[0][0] < now - s.stall_time:
             self._history.popleft()
-        ended = t >= self.path.duration
+        ended = t >= self.path.duration + s.motion_delay
+        if self._echoes(now, t, measured, velocity):
+            self.reason = (f'the measured positions followed the command with no lag for '
+                           f'{s.echo_time:.1f} s')
+            return Verdict.ECHO
         if ended and self.gap <= s.d_dist:
             return Verdict.DONE
         if self.gap <= s.d_dist:
             return Verdict.MOVING
-        if ended and t >= self.path.duration + s.settle_time:
-            return Verdict.BLOCKED
+        ceiling = s.gap_ceiling + float(allowance.sum())
+        if s.gap_ceiling and self.gap > ceiling:
+            return self._blocked(f'gap {self.gap:.3f} rad above the ceiling {ceiling:.3f}')
+        over = self.joint_gaps - (s.joint_gap_ceiling + allowance)
+        if s.joint_gap_ceiling and over.max() > 0:
+            joint = int(over.argmax())
+            return self._blocked(f'joint A{joint + 1} gap {self.joint_gaps[joint]:.3f} rad above '
+                                 f'its ceiling {s.joint_gap_ceiling + allowance[joint]:.3f}')
+        if ended and t >= self.path.duration + s.motion_delay + s.settle_time:
+            return self._blocked(f'gap {self.gap:.3f} rad {s.settle_time} s after the end')
         oldest_time, oldest = self._history[0]
         watched = now - oldest_time >= s.stall_time * 0.9
         if watched and float(np.abs(measured - oldest).sum()) < s.stall_motion:
-            return Verdict.BLOCKED
+            return self._blocked(f'stalled with gap {self.gap:.3f} rad')
         return Verdict.MOVING
 
+    def _blocked(self, reason: str) -> Verdict:
+        self.reason = reason
+        if self.onset is None and self._rising is not None:
+            self.onset = Onset(*self._rising)
+        return Verdict.BLOCKED
+
+    def _track_onset(self, now: float, measured: np.ndarray, velocity: np.ndarray,
+                     threshold: float) -> None:
+        """
+        When the gap crosses the onset threshold, trace the rise back to where it began.
+
+        Walking back from the crossing (at most ``onset_window``) while the gap grew faster
+        than ``onset_rate`` over the 0.1 s before each sample ends where it began to rise:
+        the arm was still tracking there (its gap steady), then touched, and the gap grew.
+        """
+        s = self.settings
+        self._recent.append((now, self.gap, measured.copy(), velocity.copy()))
+        while self._recent[0][0] < now - s.onset_window:
+            self._recent.popleft()
+        if self.gap <= threshold:
+            self._rising = None
+        elif self._rising is None:
+            times = np.array([sample[0] for sample in self._recent])
+            gaps = np.array([sample[1] for sample in self._recent])
+            before = np.searchsorted(times, times - RISE_WINDOW)     # ~0.1 s earlier
+            k = len(times) - 1
+            while k > 0 and times[k] - times[before[k]] > 0 and \
+                    (gaps[k] - gaps[before[k]]) / (times[k] - times[before[k]]) > s.onset_rate:
+                k -= 1
+            when, _, config, commanded = self._recent[k]
+            self._rising = (when, config, commanded)
+
+    def _echoes(self, now: float, t: float, measured: np.ndarray, velocity: np.ndarray
+                ) -> bool:
+        s = self.settings
+        if not s.echo_time:
+            return False
+        speed = float(np.abs(velocity).sum())
+        # the command itself, one or two controller periods either way: no lag at all
+        commanded = [self.path.sample(t + dt)[0] for dt in (-0.02, -0.01, 0.0, 0.01, 0.02)]
+        lag_free = min(float(np.abs(c - measured).sum()) for c in commanded) < 1e-4 + \
+            0.002 * speed
+        if speed < s.echo_speed or not lag_free:
+            self._echo_since = None
+            return False
+        if self._echo_since is None:
+            self._echo_since = now
+        return now - self._echo_since >= s.echo_time
+
     def segment(self, now: float) -> int:
-        """Return the index of the path segment commanded at time now."""
+        """Return the index of the segment commanded at time now."""
         return self.path.segment_at(now - self.start_time)

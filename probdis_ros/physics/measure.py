@@ -36,9 +36,10 @@ import numpy as np
 from probdis_ros.model import iiwa_arm
 from probdis_ros.motion.detector import BlockDetector, DetectorSettings, Verdict
 from probdis_ros.motion.jtc import JtcTrajectory
-from probdis_ros.motion.timing import time_path
+from probdis_ros.motion.profiles import time_parameterize
 from probdis_ros.physics.scene import load_scene
 from probdis_ros.physics.simulated_robot import build_robot, RobotSettings
+from probdis_ros.run import RunSettings
 
 
 def real_time_factor(scene: str = 'demo_hook', seconds: float = 5.0) -> dict:
@@ -56,6 +57,17 @@ def real_time_factor(scene: str = 'demo_hook', seconds: float = 5.0) -> dict:
         robot.step()
     return {'arm_alone': arm_alone, 'command_path': seconds / (time.perf_counter() - t0),
             'timestep_s': engine.settings.timestep}
+
+
+def _detection(**overrides) -> DetectorSettings:
+    """Return the detector settings of a run (the planner's defaults), with overrides."""
+    return replace(DetectorSettings(), **overrides)
+
+
+def _motion(path: np.ndarray, velocity_scaling: float):
+    """Return a path timed as the run times it."""
+    settings = replace(RunSettings(), velocity_scaling=velocity_scaling)
+    return time_parameterize(path, settings.limits(iiwa_arm()))
 
 
 def _drive(robot, command, settings: DetectorSettings, limit: float,
@@ -95,14 +107,14 @@ def free_tracking(velocity_scaling: float, scene: str = 'demo_hook',
     robot, _ = build_robot('physics', free, robot_settings)
     start = robot.joint_state().position
     goal = robot.engine.scene.goal
-    timed = time_path(np.array([start, goal]), iiwa_arm().velocity_limits, velocity_scaling)
+    motion = _motion(np.array([start, goal]), velocity_scaling)
     t_start = robot.time
     gaps = []
-    detector, verdict = _drive(robot, timed.command(), DetectorSettings(),
-                               timed.duration + 5.0, lambda d: gaps.append(d.gap))
+    detector, verdict = _drive(robot, motion.command, _detection(), motion.duration + 5.0,
+                               lambda d: gaps.append(d.gap))
     peak = max(gaps, default=0.0)
     return Tracking(velocity_scaling, peak, detector.gap, verdict.value,
-                    robot.time - t_start - timed.duration)
+                    robot.time - t_start - motion.duration)
 
 
 @dataclass
@@ -117,6 +129,8 @@ class BlockFigures:
     peak_force_n: float              # largest summed normal force before detection [N]
     force_at_detection_n: float
     flange_moved_m: float            # from the first contact to detection [m]
+    reason: str = ''                 # what declared the block
+    onset_error_m: float | None = None   # flange at the detector's onset vs at contact [m]
 
 
 def straight_block(scene: str = 'demo_hook', velocity_scaling: float = 0.2,
@@ -124,8 +138,7 @@ def straight_block(scene: str = 'demo_hook', velocity_scaling: float = 0.2,
     """Command the scene's straight start -> goal path and measure the block."""
     robot, _ = build_robot('physics', scene, robot_settings)
     start = robot.joint_state().position
-    timed = time_path(np.array([start, robot.engine.scene.goal]), iiwa_arm().velocity_limits,
-                      velocity_scaling)
+    motion = _motion(np.array([start, robot.engine.scene.goal]), velocity_scaling)
     t0 = robot.time
     seen = {'contact_t': None, 'contact_x': None, 'peak': 0.0, 'force': 0.0}
 
@@ -136,12 +149,16 @@ def straight_block(scene: str = 'demo_hook', velocity_scaling: float = 0.2,
             seen['contact_t'] = robot.time - t0
             seen['contact_x'] = robot.engine.flange_pose()[0]
 
-    detector, verdict = _drive(robot, timed.command(), DetectorSettings(),
-                               timed.duration + 5.0, watch)
+    detector, verdict = _drive(robot, motion.command, _detection(), motion.duration + 5.0,
+                               watch)
     contact_t, contact_x = seen['contact_t'], seen['contact_x']
     peak, force = seen['peak'], seen['force']
     detected = robot.time - t0 if verdict is Verdict.BLOCKED else None
     moved = 0.0 if contact_x is None else float(
         np.linalg.norm(robot.engine.flange_pose()[0] - contact_x))
-    return BlockFigures(verdict.value, contact_t, detected, timed.duration, detector.gap,
-                        peak, force, moved)
+    onset_error = None
+    if detector.onset is not None and contact_x is not None:
+        onset_x = iiwa_arm().fk(detector.onset.config[None]).positions[0]
+        onset_error = float(np.linalg.norm(onset_x - contact_x))
+    return BlockFigures(verdict.value, contact_t, detected, motion.duration, detector.gap,
+                        peak, force, moved, detector.reason, onset_error)

@@ -36,7 +36,7 @@ No rclpy: the mock node and ``probdis sim --engine physics`` both drive this cla
 from __future__ import annotations
 
 from collections import deque
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Protocol, TYPE_CHECKING
 
@@ -199,9 +199,7 @@ def build_robot(engine: str, world: str | Path | Scene, settings: RobotSettings 
     Return a robot at the start of a world, and a line describing it.
 
     world is a physics scene (a Scene, a file or a name in config/scenes/) for ``physics``,
-    a kinematic scenario (file or name in config/scenarios/) for ``kinematic``.  The
-    kinematic arm copies the command as the first mock did, so it runs without the driver's
-    filter.
+    a kinematic scenario (file or name in config/scenarios/) for ``kinematic``.
     """
     settings = settings or RobotSettings()
     if engine == 'kinematic':
@@ -212,8 +210,7 @@ def build_robot(engine: str, world: str | Path | Scene, settings: RobotSettings 
         if scenario.setting == '2d':
             raise ValueError(f'{world}: the iiwa needs a 3d or 3d-orient scenario')
         kinematic = KinematicEngine(iiwa_arm(), scenario.compliant_arm())
-        robot = SimulatedRobot(kinematic, scenario.start,
-                               replace(settings, filter_tau=0.0))
+        robot = SimulatedRobot(kinematic, scenario.start, settings)
         return robot, (f'scenario {scenario.name or world} with {len(scenario.obstacles)} '
                        f'hidden obstacles')
     if engine == 'physics':

@@ -231,6 +231,21 @@ class Disentangler:
         self._expect(State.RETREATING)
         self.state = State.GAVE_UP if self.paths_tried >= self.max_paths else State.READY
 
+    def withdraw(self) -> None:
+        """
+        Take back the path just planned, which was not executed: plan again from elsewhere.
+
+        The arm is not where that plan starts (its retreat was blocked), so the path would
+        begin with an edge the planner never costed; it does not count as a path tried.
+        """
+        self._expect(State.EXECUTING)
+        self.attempts.pop()
+        self.state = State.READY
+
+    def learn(self, config: np.ndarray, joint_direction: np.ndarray) -> None:
+        """Add the failure of a motion blocked outside a planned path (a blocked retreat)."""
+        self.fmap.add(*self.failure_at(self.arm.as_batch(config)[0], joint_direction))
+
     def stop(self) -> None:
         """End the run now (no further paths)."""
         if not self.state.finished:

@@ -40,6 +40,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 import numpy as np
 from probdis_ros.model import FailureMap, FailureMapError, iiwa_arm
 from probdis_ros.model.failure_map import write_document
+from probdis_ros.motion.detector import DetectorSettings
 from probdis_ros.motion.timing import hold_command
 from probdis_ros.planning import Disentangler, Method, METHODS, RRTSettings
 from probdis_ros.ros.markers import markers_msg
@@ -68,6 +69,12 @@ from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
 NODE_NAME = 'probdis_planner'
+#: The defaults of the run and of its detector: the parameters below take theirs from here.
+RUN, DETECT = RunSettings(), RunSettings().detection
+RUN_FIELDS = ('velocity_scaling', 'acceleration_scaling', 'acceleration_limit', 'jerk_limit',
+              'state_timeout', 'replan_tolerance')
+DETECTOR_FIELDS = ('d_dist', 'stall_time', 'stall_motion', 'settle_time', 'motion_delay',
+                   'gap_ceiling', 'joint_gap_ceiling', 'onset_gap', 'echo_time')
 
 
 def _float(text: str, low: float, high: float) -> ParameterDescriptor:
@@ -95,15 +102,39 @@ PARAMETERS = {
         description='the 7 arm joints, in URDF order (matched by name in joint states)')),
     'goal': ([0.0] * 7, ParameterDescriptor(
         description='goal configuration [rad], 7 values within the joint limits')),
-    'velocity_scaling': (0.2, _float('fraction of the URDF velocity limits', 0.01, 1.0)),
-    'd_dist': (0.04, _float('L1 gap [rad] above which a stalled motion is blocked',
-                            0.001, 1.0)),
-    'stall_time': (0.3, _float('time without progress that counts as stalled [s]',
-                               0.02, 10.0)),
+    'velocity_scaling': (RUN.velocity_scaling, _float(
+        'fraction of the URDF velocity limits', 0.01, 1.0)),
+    'acceleration_scaling': (RUN.acceleration_scaling, _float(
+        'fraction of the acceleration and jerk limits', 0.01, 1.0)),
+    'acceleration_limit': (RUN.acceleration_limit, _float(
+        'joint acceleration limit [rad/s^2] (the lbr stack MoveIt configuration)', 0.1, 100.0)),
+    'jerk_limit': (RUN.jerk_limit, _float('joint jerk limit [rad/s^3]', 1.0, 10000.0)),
+    'd_dist': (DETECT.d_dist, _float('L1 gap [rad] above which a stalled motion is blocked',
+                                     0.001, 1.0)),
+    'stall_time': (DETECT.stall_time, _float('time without progress that counts as stalled '
+                                             '[s]', 0.02, 10.0)),
+    'stall_motion': (DETECT.stall_motion, _float('L1 motion [rad] over stall_time below which '
+                                                 'the arm has stalled', 1e-4, 1.0)),
+    'settle_time': (DETECT.settle_time, _float('after the end, the gap must close within this '
+                                               '[s]', 0.01, 10.0)),
+    'motion_delay': (DETECT.motion_delay, _float('how far the arm lags its command [s]: the '
+                                                 'detector compares with the command this '
+                                                 'much earlier', 0.0, 1.0)),
+    'gap_ceiling': (DETECT.gap_ceiling, _float('L1 gap [rad] that is a block at once (force '
+                                               '~ stiffness x gap); 0: off', 0.0, 10.0)),
+    'joint_gap_ceiling': (DETECT.joint_gap_ceiling, _float('one joint\'s gap [rad] that is a '
+                                                           'block at once; 0: off', 0.0, 10.0)),
+    'onset_gap': (DETECT.onset_gap, _float('a block began where the gap last rose above this '
+                                           '[rad]', 0.001, 1.0)),
+    'echo_time': (DETECT.echo_time, _float('seconds of lag-free motion that reveal a driver '
+                                           'echoing the command; 0: off', 0.0, 10.0)),
+    'replan_tolerance': (RUN.replan_tolerance, _float('L1 distance [rad] between the arm and '
+                                                      'a plan\'s start above which it plans '
+                                                      'again from the arm', 0.001, 1.0)),
     'goal_tolerance': (0.04, _float('joint-space distance to the goal that counts as reached',
                                     0.0, 1.0)),
-    'state_timeout': (0.5, _float('joint states older than this stop the run [s]',
-                                  0.01, 10.0)),
+    'state_timeout': (RUN.state_timeout, _float('joint states older than this stop the run '
+                                                '[s]', 0.01, 10.0)),
     'max_paths': (20, _int('N_ITER: paths before giving up', 1, 1000)),
     'min_retreat': (0.1, _float('a retreat goes back along the way the arm came until this '
                                 'far from the block [rad]; 0: to the last via point only',
@@ -294,10 +325,9 @@ class PlannerNode(Node):
                             goal_tolerance=self.get_parameter('goal_tolerance').value,
                             min_retreat=self.get_parameter('min_retreat').value)
         value = self.get_parameter
-        settings = RunSettings(velocity_scaling=value('velocity_scaling').value,
-                               d_dist=value('d_dist').value,
-                               stall_time=value('stall_time').value,
-                               state_timeout=value('state_timeout').value)
+        detection = DetectorSettings(**{name: value(name).value for name in DETECTOR_FIELDS})
+        settings = RunSettings(**{name: value(name).value for name in RUN_FIELDS},
+                               detection=detection)
         self.run = Run(self.arm, loop, settings, clock=self._now)
         self._open_bag()
         self.run.start(self.measured_at, self.measured)
