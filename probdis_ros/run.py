@@ -119,6 +119,7 @@ class Send:
 
     command: TrajectoryCommand
     path: np.ndarray | None = None     # the planned via points, for markers (paths only)
+    at: float = 0.0                    # when it was sent: the detector watches it from then
 
 
 @dataclass(frozen=True)
@@ -297,8 +298,8 @@ class Run:
     def _send(self, motion: Motion, path: np.ndarray | None = None) -> None:
         """Send a motion and watch it as JTC runs it, from the measured state now."""
         command = motion.command
-        self._emit(Send(command, path))
         now = self._time()
+        self._emit(Send(command, path, now))
         self.motion = motion
         self.trajectory = JtcTrajectory(command, self.measured, self.measured_velocity, now)
         self.detector = BlockDetector(self.trajectory, now, self.settings.detection)
@@ -397,7 +398,7 @@ class Run:
         else:
             return
         q = np.clip(q, self.arm.lower, self.arm.upper)
-        self._emit(Send(stop(q, v, a, self.limits).command))
+        self._emit(Send(stop(q, v, a, self.limits).command, None, now))
 
     def status(self) -> dict:
         """Return the run's part of the status document."""

@@ -120,7 +120,8 @@ def test_sim_baselines_and_bad_input(probdis, tmp_path):
 
 
 def test_bench_plan_json_prints_both_medians(probdis):
-    doc = json.loads(probdis('bench', 'plan', '--seeds', '2', '--json', timeout=300).stdout)
+    doc = json.loads(probdis('bench', 'plan', '--seeds', '2', '--large', '0', '--json',
+                             timeout=300).stdout)
     assert list(doc) == ['median_s_empty_map', 'median_s_19_failures']
     assert all(isinstance(v, float) and v > 0 for v in doc.values())
 

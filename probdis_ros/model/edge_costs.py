@@ -44,16 +44,23 @@ def _batch(arm: Arm, sources: np.ndarray, target: np.ndarray, base, limits):
     target = np.ascontiguousarray(target, dtype=float)
     base = np.zeros(len(sources)) if base is None else \
         np.broadcast_to(np.asarray(base, dtype=float), len(sources))
+    # fresh writable arrays: a read-only one is another type to numba, compiled again
     limits = np.full(len(sources), np.inf) if limits is None else \
-        np.ascontiguousarray(np.broadcast_to(np.asarray(limits, dtype=float), len(sources)))
-    return sources, target, np.ascontiguousarray(base), limits
+        np.array(np.broadcast_to(np.asarray(limits, dtype=float), len(sources)))
+    return sources, target, np.array(base), limits
 
 
 class EdgeCoster:
     """Cost of straight joint-space edges under a fixed failure map (compiled)."""
 
     def __init__(self, arm: Arm, fmap: FailureMap, delta: float = DEFAULT_DELTA,
-                 terms: EdgeTerms | None = None) -> None:
+                 terms: EdgeTerms | None = None, prune: bool = True) -> None:
+        """
+        Prepare the map for the kernels.
+
+        ``prune`` lets a chunk of points skip the failures whose bound cannot raise its
+        maximum probability (exact: the same costs bit for bit; False for the checks).
+        """
         if fmap.task_space is not arm.task_space:
             raise ValueError(f'failure map is {fmap.task_space.value} but the arm works in '
                              f'{arm.task_space.value}')
@@ -63,13 +70,25 @@ class EdgeCoster:
         self.terms = terms or EdgeTerms()
         self.c_fail = float(fmap.c_fail if self.terms.c_fail is None else self.terms.c_fail)
         dim = arm.task_space.dim
-        self._failures = (          # points and directions padded to 3-D (z = 0 in 2-D)
-            _padded(fmap.points, dim), _padded(fmap.directions, dim),
-            np.ascontiguousarray(quaternion_to_rotation(fmap.orientations)).reshape(-1, 3, 3),
-            self.c_fail, bool(arm.task_space.has_orientation))
+        # points and directions padded to 3-D (z = 0 in 2-D); column-major, so that the
+        # kernels' bounds of all failures vectorise (kernels._chunk_probabilities)
+        self._failures = (
+            np.asfortranarray(_padded(fmap.points, dim)),
+            np.asfortranarray(_padded(fmap.directions, dim)),
+            np.asfortranarray(quaternion_to_rotation(fmap.orientations).reshape(-1, 3, 3)),
+            self.c_fail, bool(arm.task_space.has_orientation), bool(prune))
         self._arm = arm.kernel_params()
         self._terms = (float(self.terms.length_weight), float(self.terms.risk_weight),
                        float(self.terms.cap), P_MAX)
+
+    @property
+    def compiled(self) -> bool:
+        """Tell whether the costs come from the compiled kernels (not overridden)."""
+        return type(self).costs is EdgeCoster.costs and type(self).cheapest is EdgeCoster.cheapest
+
+    def kernel_args(self) -> tuple:
+        """Return delta, the terms, the arm and the failures as the kernels take them."""
+        return (self.delta, *self._terms, *self._arm, *self._failures)
 
     def costs(self, sources: np.ndarray, target: np.ndarray, toward: bool = True,
               base: np.ndarray | float | None = None,

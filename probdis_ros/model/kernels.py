@@ -273,18 +273,33 @@ def _arccos(x):
     return large if big else small
 
 
+#: From this many failures on, a chunk skips the failures that cannot raise its maximum.
+SKIP_FROM = 4
+
+
 @numba.njit(cache=True, error_model='numpy')
-def _chunk_probabilities(pos, rot, count, f_points, f_dirs, f_rots, c_fail, use_orient,
+def _chunk_probabilities(pos, rot, count, f_points, f_dirs, f_rots, c_fail, use_orient, prune,
                          soa, p_out, near2=0.0, at_failure=-1.0):
     """
     Write max over failures of P_COORD * (1 - 0.5 D_ORIENT) for each pose of the chunk.
 
-    Every (failure, point) pair is evaluated exactly, in an inner loop over the chunk's
-    points that the compiler vectorises: the poses are first copied to one contiguous row per
+    Each evaluated (failure, point) pair is exact, in an inner loop over the chunk's points
+    that the compiler vectorises: the poses are first copied to one contiguous row per
     coordinate (soa, (12, CHUNK)), the arccos is _arccos, and the numpy error model drops the
-    division checks that would otherwise keep the loop scalar.  This is about twice as fast
-    as skipping failures by bounds one at a time, whose scalar square roots and divisions
-    cost more than the vector arithmetic they save.
+    division checks that would otherwise keep the loop scalar.  (Bounds per point cost more
+    in scalar square roots and divisions than the vector arithmetic they save.)
+
+    Exact pruning per chunk: an upper bound of each failure's probability over the chunk is
+    compared with the least maximum found so far among the chunk's points; a failure whose
+    bound does not exceed it cannot change any point's maximum and is skipped.  The bound
+    takes the chunk's bounding sphere (a point is at least ``D - radius`` from the failure,
+    its alpha at most the center's plus ``asin(radius / D)``) and the spread of its
+    rotations about the middle pose (the angle to the failure's orientation is at least
+    the middle pose's minus the spread), with margins above the kernel's rounding; the
+    bounds of all failures are computed in one vectorised loop.  The failure of the highest
+    bound goes first, so that the maximum rises early.  The result is the same number, bit
+    for bit, as evaluating every failure: a maximum does not depend on the order, nor on
+    values that do not win (``prune`` False evaluates them all, for the checks).
     """
     for i in range(count):
         p_out[i] = 0.0
@@ -292,32 +307,120 @@ def _chunk_probabilities(pos, rot, count, f_points, f_dirs, f_rots, c_fail, use_
             soa[k, i] = pos[i, k]
         for k in range(9):
             soa[3 + k, i] = rot[i, k // 3, k % 3]
+    n_fail = f_points.shape[0]
+    if not prune or n_fail < SKIP_FROM or count < 2:
+        for f in range(n_fail):
+            _failure_into(f, count, soa, f_points, f_dirs, f_rots, c_fail, use_orient,
+                          p_out, near2, at_failure)
+        return
+    # the chunk's bounding sphere (center: mean point) and, about its middle pose's
+    # rotation, the largest rotation angle of its poses
+    cx = cy = cz = 0.0
+    for i in range(count):
+        cx += soa[0, i]
+        cy += soa[1, i]
+        cz += soa[2, i]
+    cx /= count
+    cy /= count
+    cz /= count
+    r2 = 0.0
+    mid = count // 2
+    spread = 0.0
+    for i in range(count):
+        r2 = max(r2, (soa[0, i] - cx) ** 2 + (soa[1, i] - cy) ** 2 + (soa[2, i] - cz) ** 2)
+        if use_orient:
+            trace = 0.0
+            for k in range(9):
+                trace += soa[3 + k, mid] * soa[3 + k, i]
+            spread = max(spread, _rotation_angle(trace))
+    radius = np.sqrt(r2) * (1.0 + 1e-12) + 1e-12 + np.sqrt(near2)
+    # every failure's bound, in one loop without branches that the compiler vectorises
+    # (the failure arrays are column-major: EdgeCoster)
+    bounds = np.empty(n_fail)
+    for f in range(n_fail):
+        dx = f_points[f, 0] - cx
+        dy = f_points[f, 1] - cy
+        dz = f_points[f, 2] - cz
+        dist = np.sqrt(dx * dx + dy * dy + dz * dz)
+        apart = max(dist, 1e-300)
+        gap = max(0.0, dist - radius)
+        cos_c = (f_dirs[f, 0] * dx + f_dirs[f, 1] * dy + f_dirs[f, 2] * dz) / apart
+        alpha = (_arccos(min(1.0, max(-1.0, cos_c))) + 0.5 * np.pi
+                 - _arccos(min(1.0, radius / apart)) + ANGLE_MARGIN)
+        ratio = min(1.0, alpha / np.pi)
+        ratio = 1.0 if dist <= radius else ratio * ratio * ratio
+        factor = 1.0
+        if use_orient:
+            trace = (f_rots[f, 0, 0] * soa[3, mid] + f_rots[f, 0, 1] * soa[4, mid]
+                     + f_rots[f, 0, 2] * soa[5, mid] + f_rots[f, 1, 0] * soa[6, mid]
+                     + f_rots[f, 1, 1] * soa[7, mid] + f_rots[f, 1, 2] * soa[8, mid]
+                     + f_rots[f, 2, 0] * soa[9, mid] + f_rots[f, 2, 1] * soa[10, mid]
+                     + f_rots[f, 2, 2] * soa[11, mid])
+            factor = 1.0 - 0.5 * max(0.0, _rotation_angle(trace) - spread
+                                     - ANGLE_MARGIN) / np.pi
+        bounds[f] = (1.0 + 1e-9) * ratio * factor / (1.0 + c_fail * gap * gap)
+    first = 0
+    for f in range(n_fail):
+        if bounds[f] > bounds[first]:
+            first = f
+    _failure_into(first, count, soa, f_points, f_dirs, f_rots, c_fail, use_orient, p_out,
+                  near2, at_failure)
+    least = _least(p_out, count)
+    for f in range(n_fail):
+        if f != first and bounds[f] > least:
+            _failure_into(f, count, soa, f_points, f_dirs, f_rots, c_fail, use_orient,
+                          p_out, near2, at_failure)
+            least = _least(p_out, count)
+
+
+#: [rad] added to angles in bounds: above the rounding of arccos near +-1 (~3e-8)
+ANGLE_MARGIN = 1e-6
+
+
+@numba.njit(cache=True, inline='always')
+def _rotation_angle(trace):
+    """Return the angle in [0, pi] of a rotation from its trace, as the kernel's D_ORIENT."""
+    return 2.0 * _arccos(np.sqrt(min(1.0, max(0.0, (trace + 1.0) * 0.25))))
+
+
+@numba.njit(cache=True, inline='always')
+def _least(p_out, count):
+    """Return the least value of the chunk's maxima."""
+    least = p_out[0]
+    for i in range(1, count):
+        least = min(least, p_out[i])
+    return least
+
+
+@numba.njit(cache=True, error_model='numpy', inline='always')
+def _failure_into(f, count, soa, f_points, f_dirs, f_rots, c_fail, use_orient, p_out, near2,
+                  at_failure):
+    """Raise each point's maximum in p_out to failure f's probability there."""
     px, py, pz = soa[0], soa[1], soa[2]
     r00, r01, r02, r10, r11, r12 = soa[3], soa[4], soa[5], soa[6], soa[7], soa[8]
     r20, r21, r22 = soa[9], soa[10], soa[11]
-    for f in range(f_points.shape[0]):
-        fx, fy, fz = f_points[f, 0], f_points[f, 1], f_points[f, 2]
-        ux, uy, uz = f_dirs[f, 0], f_dirs[f, 1], f_dirs[f, 2]
-        g = f_rots[f]
-        g00, g01, g02, g10, g11, g12 = g[0, 0], g[0, 1], g[0, 2], g[1, 0], g[1, 1], g[1, 2]
-        g20, g21, g22 = g[2, 0], g[2, 1], g[2, 2]
-        for i in range(count):
-            dx = fx - px[i]
-            dy = fy - py[i]
-            dz = fz - pz[i]
-            d2 = dx * dx + dy * dy + dz * dz
-            # at the failure itself (d2 <= near2) cos alpha is at_failure: -1 (alpha = pi,
-            # ratio 1) as in the paper, +1 (behind it) for where a Hard edge starts
-            c = (ux * dx + uy * dy + uz * dz) / np.sqrt(d2) if d2 > near2 else at_failure
-            ratio = _arccos(min(1.0, max(-1.0, c))) / np.pi
-            p = ratio * ratio * ratio / (1.0 + c_fail * d2)
-            # orientation: 1 - 0.5 D_ORIENT from trace(G^T R) (use_orient is constant in the
-            # loop, which the compiler hoists)
-            trace = (g00 * r00[i] + g01 * r01[i] + g02 * r02[i] + g10 * r10[i] + g11 * r11[i]
-                     + g12 * r12[i] + g20 * r20[i] + g21 * r21[i] + g22 * r22[i])
-            half_cos = np.sqrt(min(1.0, max(0.0, (trace + 1.0) * 0.25)))
-            factor = 1.0 - _arccos(half_cos) / np.pi
-            p_out[i] = max(p_out[i], p * factor if use_orient else p)
+    fx, fy, fz = f_points[f, 0], f_points[f, 1], f_points[f, 2]
+    ux, uy, uz = f_dirs[f, 0], f_dirs[f, 1], f_dirs[f, 2]
+    g = f_rots[f]
+    g00, g01, g02, g10, g11, g12 = g[0, 0], g[0, 1], g[0, 2], g[1, 0], g[1, 1], g[1, 2]
+    g20, g21, g22 = g[2, 0], g[2, 1], g[2, 2]
+    for i in range(count):
+        dx = fx - px[i]
+        dy = fy - py[i]
+        dz = fz - pz[i]
+        d2 = dx * dx + dy * dy + dz * dz
+        # at the failure itself (d2 <= near2) cos alpha is at_failure: -1 (alpha = pi,
+        # ratio 1) as in the paper, +1 (behind it) for where a Hard edge starts
+        c = (ux * dx + uy * dy + uz * dz) / np.sqrt(d2) if d2 > near2 else at_failure
+        ratio = _arccos(min(1.0, max(-1.0, c))) / np.pi
+        p = ratio * ratio * ratio / (1.0 + c_fail * d2)
+        # orientation: 1 - 0.5 D_ORIENT from trace(G^T R) (use_orient is constant in the
+        # loop, which the compiler hoists)
+        trace = (g00 * r00[i] + g01 * r01[i] + g02 * r02[i] + g10 * r10[i] + g11 * r11[i]
+                 + g12 * r12[i] + g20 * r20[i] + g21 * r21[i] + g22 * r22[i])
+        half_cos = np.sqrt(min(1.0, max(0.0, (trace + 1.0) * 0.25)))
+        factor = 1.0 - _arccos(half_cos) / np.pi
+        p_out[i] = max(p_out[i], p * factor if use_orient else p)
 
 
 @numba.njit(cache=True, inline='always')
@@ -349,7 +452,7 @@ def _descend(p_buf, count, cap, level):
 
 @numba.njit(cache=True)
 def _start_probability(cs, sn, n, kind, joint_params, offsets, bases, tip_offset,
-                       tip_rotation, f_points, f_dirs, f_rots, c_fail, use_orient, pos, rot,
+                       tip_rotation, f_points, f_dirs, f_rots, c_fail, use_orient, prune, pos, rot,
                        soa, p_buf):
     """
     Return the failure probability at the start of an edge (its cosines and sines).
@@ -362,7 +465,7 @@ def _start_probability(cs, sn, n, kind, joint_params, offsets, bases, tip_offset
     n_joints = cs.shape[0]
     _chunk_poses(cs.copy(), sn.copy(), np.ones(n_joints), np.zeros(n_joints), cs, -1, 1, n,
                  kind, joint_params, offsets, bases, tip_offset, tip_rotation, pos, rot)
-    _chunk_probabilities(pos, rot, 1, f_points, f_dirs, f_rots, c_fail, use_orient, soa,
+    _chunk_probabilities(pos, rot, 1, f_points, f_dirs, f_rots, c_fail, use_orient, prune, soa,
                          p_buf, AT_FAILURE ** 2, 1.0)
     return p_buf[0]
 
@@ -370,7 +473,7 @@ def _start_probability(cs, sn, n, kind, joint_params, offsets, bases, tip_offset
 @numba.njit(cache=True)
 def edge_cost_kernel(a, b, limit, delta, length_weight, risk_weight, cap, p_max, kind,
                      joint_params, offsets, bases, tip_offset, tip_rotation,
-                     f_points, f_dirs, f_rots, c_fail, use_orient, pos, rot, soa, p_buf):
+                     f_points, f_dirs, f_rots, c_fail, use_orient, prune, pos, rot, soa, p_buf):
     """
     Return the cost of edge a -> b, or inf once it reaches limit (it only grows on the way).
 
@@ -412,12 +515,13 @@ def edge_cost_kernel(a, b, limit, delta, length_weight, risk_weight, cap, p_max,
     if cap < np.inf:
         level = max(cap, _start_probability(cs, sn, n, kind, joint_params, offsets, bases,
                                             tip_offset, tip_rotation, f_points, f_dirs,
-                                            f_rots, c_fail, use_orient, pos, rot, soa, p_buf))
+                                            f_rots, c_fail, use_orient, prune, pos, rot, soa,
+                                            p_buf))
     for k0 in range(0, n, CHUNK):
         count = min(CHUNK, n - k0)
         _chunk_poses(cs, sn, cd, sd, b, k0, count, n, kind, joint_params, offsets, bases,
                      tip_offset, tip_rotation, pos, rot)
-        _chunk_probabilities(pos, rot, count, f_points, f_dirs, f_rots, c_fail, use_orient,
+        _chunk_probabilities(pos, rot, count, f_points, f_dirs, f_rots, c_fail, use_orient, prune,
                              soa, p_buf)
         log_survival, highest = _chunk_log_survival(p_buf, count, p_max)
         if highest > cap:
@@ -435,7 +539,7 @@ def edge_cost_kernel(a, b, limit, delta, length_weight, risk_weight, cap, p_max,
 @numba.njit(cache=True, nogil=True)
 def edge_costs_kernel(sources, target, base, limits, toward, delta, length_weight,
                       risk_weight, cap, p_max, kind, joint_params, offsets, bases, tip_offset,
-                      tip_rotation, f_points, f_dirs, f_rots, c_fail, use_orient, out):
+                      tip_rotation, f_points, f_dirs, f_rots, c_fail, use_orient, prune, out):
     """
     Write ``base[i] + cost(sources[i] -> target)`` (``target -> sources[i]`` unless toward).
 
@@ -452,13 +556,19 @@ def edge_costs_kernel(sources, target, base, limits, toward, delta, length_weigh
         out[i] = base[i] + edge_cost_kernel(a, b, limits[i], delta, length_weight,
                                             risk_weight, cap, p_max, kind, joint_params,
                                             offsets, bases, tip_offset, tip_rotation,
-                                            f_points, f_dirs, f_rots, c_fail, use_orient, pos,
+                                            f_points, f_dirs, f_rots, c_fail, use_orient,
+                                            prune, pos,
                                             rot, soa, p_buf)
 
 
 @numba.njit(cache=True)
 def farthest_kernel(samples, nodes):
-    """Return the index of the sample whose nearest node is farthest (squared distances)."""
+    """
+    Return the index of the sample whose nearest node is farthest (squared distances).
+
+    A sample is dropped as soon as a node nearer than the best so far is found: it can no
+    longer win, so the answer is the same as from every distance.
+    """
     best = -1.0
     best_index = 0
     for i in range(samples.shape[0]):
@@ -470,6 +580,8 @@ def farthest_kernel(samples, nodes):
                 d2 += diff * diff
             if d2 < nearest:
                 nearest = d2
+                if nearest <= best:
+                    break
         if nearest > best:
             best = nearest
             best_index = i
@@ -479,7 +591,7 @@ def farthest_kernel(samples, nodes):
 @numba.njit(cache=True, nogil=True)
 def cheapest_edge_kernel(sources, target, base, toward, delta, length_weight, risk_weight,
                          cap, p_max, kind, joint_params, offsets, bases, tip_offset,
-                         tip_rotation, f_points, f_dirs, f_rots, c_fail, use_orient):
+                         tip_rotation, f_points, f_dirs, f_rots, c_fail, use_orient, prune):
     """
     Return (i, total) minimising ``base[i] + cost(edge i)``; (-1, inf) if none is finite.
 
@@ -536,7 +648,8 @@ def cheapest_edge_kernel(sources, target, base, toward, delta, length_weight, ri
             if not done[i]:
                 level[i] = max(cap, _start_probability(
                     cs[i], sn[i], steps[i], kind, joint_params, offsets, bases, tip_offset,
-                    tip_rotation, f_points, f_dirs, f_rots, c_fail, use_orient, pos, rot, soa,
+                    tip_rotation, f_points, f_dirs, f_rots, c_fail, use_orient, prune, pos, rot,
+                    soa,
                     p_buf))
     while True:
         pick = -1
@@ -555,7 +668,7 @@ def cheapest_edge_kernel(sources, target, base, toward, delta, length_weight, ri
         count = min(CHUNK, steps[i] - k_done[i])
         _chunk_poses(cs[i], sn[i], cd[i], sd[i], ends[i], k_done[i], count, steps[i], kind,
                      joint_params, offsets, bases, tip_offset, tip_rotation, pos, rot)
-        _chunk_probabilities(pos, rot, count, f_points, f_dirs, f_rots, c_fail, use_orient,
+        _chunk_probabilities(pos, rot, count, f_points, f_dirs, f_rots, c_fail, use_orient, prune,
                              soa, p_buf)
         k_done[i] += count
         log_survival, highest = _chunk_log_survival(p_buf, count, p_max)

@@ -16,16 +16,20 @@
 The search tree of ProbRRT: nodes, parents, edge costs, costs-to-come, children.
 
 A start tree holds costs-to-come (its edges run parent -> child, the way the arm moves); a
-goal tree (``reverse``) holds costs-to-go (edges child -> parent).  Every node keeps the
-list of its children, so that re-parenting a node updates the costs of its subtree alone,
-as OMPL's RRT* does (``updateChildCosts``), instead of rebuilding the parent relation.
+goal tree (``reverse``) holds costs-to-go (edges child -> parent).  Every node keeps its
+children (a linked list: ``first_child``, ``next_sibling``), so that re-parenting a node
+updates the costs of its subtree alone, as OMPL's RRT* does (``updateChildCosts``),
+instead of rebuilding the parent relation.  Everything is a preallocated array, so that
+the compiled planner loop (:mod:`probdis_ros.model.tree_kernels`) works on the same tree
+as these methods.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
+from probdis_ros.model.tree_kernels import is_ancestor, reparent
 
 
 @dataclass
@@ -35,22 +39,34 @@ class Tree:
     nodes: np.ndarray
     positions: np.ndarray
     reverse: bool
-    parent: list[int] = field(default_factory=list)
-    edge: list[float] = field(default_factory=list)
-    children: list[list[int]] = field(default_factory=list)
-    costs: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    size: int = 0
-    rewires: int = 0
+    parent: np.ndarray
+    edge: np.ndarray
+    costs: np.ndarray
+    first_child: np.ndarray
+    next_sibling: np.ndarray
+    counts: np.ndarray              # [size, rewires], shared with the compiled loop
 
     @classmethod
     def rooted(cls, root: np.ndarray, root_position: np.ndarray, capacity: int,
                reverse: bool) -> Tree:
         """Return a tree holding only its root, with room for capacity nodes."""
-        nodes = np.empty((capacity, len(root)))
-        positions = np.empty((capacity, len(root_position)))
-        tree = cls(nodes, positions, reverse, costs=np.empty(capacity))
+        capacity = max(int(capacity), 1)
+        tree = cls(np.empty((capacity, len(root))), np.empty((capacity, len(root_position))),
+                   reverse, np.empty(capacity, dtype=np.int64), np.empty(capacity),
+                   np.empty(capacity), np.empty(capacity, dtype=np.int64),
+                   np.empty(capacity, dtype=np.int64), np.zeros(2, dtype=np.int64))
         tree.append(root, root_position, -1, 0.0, 0.0)
         return tree
+
+    @property
+    def size(self) -> int:
+        """Return the number of nodes."""
+        return int(self.counts[0])
+
+    @property
+    def rewires(self) -> int:
+        """Return how many re-parentings (RRT* rewiring) the tree has seen."""
+        return int(self.counts[1])
 
     @property
     def cost(self) -> np.ndarray:
@@ -58,63 +74,62 @@ class Tree:
         return self.costs[:self.size]
 
     @property
-    def full(self) -> bool:
-        """Tell whether no node can be added."""
-        return self.size == len(self.nodes)
+    def children(self) -> list[list[int]]:
+        """Return the children of every node, each list in index order."""
+        out = [[] for _ in range(self.size)]
+        for node in range(1, self.size):
+            out[self.parent[node]].append(node)
+        return out
+
+    def reserve(self, extra: int) -> None:
+        """Make room for ``extra`` more nodes (the compiled loop cannot grow the arrays)."""
+        need = self.size + extra
+        if need <= len(self.nodes):
+            return
+        capacity = max(need, 2 * len(self.nodes))
+        for name in ('nodes', 'positions', 'parent', 'edge', 'costs', 'first_child',
+                     'next_sibling'):
+            old = getattr(self, name)
+            new = np.empty((capacity, *old.shape[1:]), dtype=old.dtype)
+            new[:len(old)] = old
+            setattr(self, name, new)
 
     def append(self, node: np.ndarray, position: np.ndarray, parent: int, edge: float,
                cost: float) -> int:
         """Add a leaf under parent (-1: the root) and return its index."""
-        if self.full:
-            self._grow()
+        self.reserve(1)
         index = self.size
         self.nodes[index] = node
         self.positions[index] = position
-        self.parent.append(parent)
-        self.edge.append(edge)
-        self.children.append([])
-        if parent >= 0:
-            self.children[parent].append(index)
+        self.parent[index] = parent
+        self.edge[index] = edge
         self.costs[index] = cost
-        self.size += 1
+        self.first_child[index] = -1
+        self.next_sibling[index] = -1
+        if parent >= 0:
+            self.next_sibling[index] = self.first_child[parent]
+            self.first_child[parent] = index
+        self.counts[0] += 1
         return index
-
-    def _grow(self) -> None:
-        capacity = max(2 * len(self.nodes), 1)
-        self.nodes = np.resize(self.nodes, (capacity, self.nodes.shape[1]))
-        self.positions = np.resize(self.positions, (capacity, self.positions.shape[1]))
-        self.costs = np.resize(self.costs, capacity)
 
     def is_ancestor(self, ancestor: int, node: int) -> bool:
         """Tell whether ancestor lies on the way from node up to the root (node included)."""
-        while node >= 0:
-            if node == ancestor:
-                return True
-            node = self.parent[node]
-        return False
+        return bool(is_ancestor(self.parent, ancestor, node))
 
     def reparent(self, index: int, parent: int, edge: float) -> None:
         """Move a node under a new parent and update the costs of its subtree only."""
         if self.is_ancestor(index, parent):
             raise ValueError(f'node {parent} lies in the subtree of {index}: a cycle')
-        self.children[self.parent[index]].remove(index)
-        self.children[parent].append(index)
-        self.parent[index] = parent
-        self.edge[index] = edge
-        self.rewires += 1
-        stack = [index]
-        while stack:
-            node = stack.pop()
-            self.costs[node] = self.costs[self.parent[node]] + self.edge[node]
-            stack.extend(self.children[node])
+        reparent(self.parent, self.edge, self.costs, self.first_child, self.next_sibling,
+                 self.counts, index, parent, edge)
 
     def chain(self, index: int) -> list[int]:
         """Node indices from index up to the root."""
         out = [index]
         while self.parent[out[-1]] >= 0:
-            out.append(self.parent[out[-1]])
+            out.append(int(self.parent[out[-1]]))
         return out
 
     def leaves(self) -> np.ndarray:
         """Return the indices of the nodes without children."""
-        return np.array([i for i in range(self.size) if not self.children[i]], dtype=int)
+        return np.flatnonzero(self.first_child[:self.size] < 0)

@@ -87,7 +87,7 @@ def world_of(world: str, engine: str) -> tuple[Path, str, np.ndarray]:
 
 def run_demo(world: str = DEFAULT_SCENE, timeout: float = 300.0, quiet: bool = False,
              extra_planner_args: tuple[str, ...] = (), engine: str = 'physics',
-             sim_time: bool = False, real_time_factor: float = 0.0,
+             sim_time: bool = False, real_time_factor: float = 5.0,
              extra_mock_args: tuple[str, ...] = ()) -> dict:
     """
     Run a disentangling against the mock iiwa; return the outcome summary.

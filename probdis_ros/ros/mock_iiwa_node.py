@@ -87,8 +87,8 @@ class MockIiwa(Node):
         p('object_mass_error', 0.0, _describe('real minus assumed object mass [kg]',
                                               -5.0, 5.0))
         p('sim_time', False, _describe('run on simulated time and publish /clock'))
-        p('real_time_factor', 0.0, _describe('with sim_time: speed over the wall clock; '
-                                             '0: as fast as possible', 0.0, 1000.0))
+        p('real_time_factor', 5.0, _describe('with sim_time: speed over the wall clock '
+                                             '(at most); 0: as fast as possible', 0.0, 1000.0))
         p('seed', 0, ParameterDescriptor(description='noise stream', read_only=True))
         p('joint_states_topic', '/lbr/joint_states', _describe('sensor_msgs/JointState out'))
         p('trajectory_topic', '/lbr/joint_trajectory_controller/joint_trajectory',
@@ -120,7 +120,12 @@ class MockIiwa(Node):
             self.scene_pub = self.create_publisher(MarkerArray, '~/scene', latched)
             self.scene_pub.publish(scene_markers(scene, self._stamp(self.robot.time)))
         self.period = settings.period
-        self.create_timer(self.period if not self.sim_time else 0.0005, self._tick)
+        # on simulated time one controller period per callback, so that a command arriving
+        # in between is taken at the next update, as JTC takes it; the timer sets the speed
+        fastest = 0.0005
+        tick = self.period if not self.sim_time else (
+            max(self.period / self.factor, fastest) if self.factor else fastest)
+        self.create_timer(tick, self._tick)
         self.get_logger().info(f'mock iiwa ({value("engine")}): {self.description}' +
                                (' on simulated time' if self.sim_time else ''))
 
@@ -138,11 +143,10 @@ class MockIiwa(Node):
         self.robot.command(command)
 
     def _steps_due(self) -> int:
-        """Return how many controller periods to run now (a late tick catches up)."""
-        if self.sim_time and self.factor == 0.0:
+        """Return how many controller periods to run now (on wall time a late tick catches up)."""
+        if self.sim_time:
             return 1
-        speed = self.factor if self.sim_time else 1.0
-        due = (time.monotonic() - self.wall_start) * speed - self.robot.time
+        due = time.monotonic() - self.wall_start - self.robot.time
         return int(np.clip(np.floor(due / self.period + 1e-9), 0, 10))
 
     def _tick(self) -> None:

@@ -29,7 +29,9 @@ written atomically after every new failure and reloaded at start-up.
 
 from __future__ import annotations
 
+from collections import deque
 from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import asdict
 import json
 import os
 from pathlib import Path
@@ -204,6 +206,7 @@ class PlannerNode(Node):
                                  self._on_joint_state, states_qos, raw=True)
         self.failure_pub = self.create_publisher(String, '~/failures', 10)
         self.recorder: BagRecorder | None = None
+        self._sent: deque[float] = deque()     # when each own command was sent, to record it
         self.recorder_close_at: float | None = None
         self.bag_path = ''
         self._record_topics = [
@@ -358,9 +361,18 @@ class PlannerNode(Node):
         self.bag_path = str(path)
 
     def _record(self, topic: str, data: bytes, info: dict) -> None:
-        """Store a message stamped with its DDS receive time, the detector's time base."""
-        if self.recorder is not None:
-            self.recorder.write(topic, round(self._receive_time(info) * 1e9), data)
+        """
+        Store a message stamped on the detector's time base.
+
+        That is its receive time, except for this node's own commands: they are stamped with
+        the time the detector began to watch them, so that a replay judges them alike.
+        """
+        if self.recorder is None:
+            return
+        stamp = self._receive_time(info)
+        if topic == self._record_topics[1][0] and self._sent:
+            stamp = self._sent.popleft()
+        self.recorder.write(topic, round(stamp * 1e9), data)
 
     def _close_bag(self) -> None:
         if self.recorder is not None:
@@ -424,6 +436,7 @@ class PlannerNode(Node):
             action = run.actions.pop(0)
             if isinstance(action, Send):
                 self.traj_pub.publish(trajectory_msg(action.command, self.joint_names))
+                self._sent.append(action.at)
                 if action.path is not None:
                     self._publish_markers(action.path)
             elif isinstance(action, PlanFrom):
@@ -463,12 +476,18 @@ class PlannerNode(Node):
         self._act()
 
     def _on_joint_state(self, data: bytes, info: dict) -> None:
-        self._record(self._record_topics[0][0], data, info)
         try:
             msg = deserialize_message(data, JointState)
         except Exception as err:   # undecodable bytes must not stop the node
+            self._record(self._record_topics[0][0], data, info)
             self.get_logger().error(f'joint state undecodable: {err}', throttle_duration_sec=1.0)
             return
+        stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        # on simulated time the stamp is the sample's time; the node's clock may already
+        # have moved on when a busy executor gets to the message
+        now = stamp if self.use_sim_time and stamp > 0 else self._receive_time(info)
+        if self.recorder is not None:
+            self.recorder.write(self._record_topics[0][0], round(now * 1e9), data)
         try:
             q = joint_positions(msg, self.joint_names)
         except BadJointStateError as err:
@@ -478,7 +497,6 @@ class PlannerNode(Node):
                 self.run.bad_joint_state(str(err))
                 self._act()
             return
-        now = self._receive_time(info)
         self.measured, self.measured_at = q, now
         if self.run is not None:
             self.run.on_joint_state(now, q, joint_velocities(msg, self.joint_names))
@@ -489,7 +507,7 @@ class PlannerNode(Node):
     def status(self) -> dict:
         """Return the status document published on ~/status."""
         if self.run is not None:
-            status = self.run.status()
+            status = {**self.run.status(), 'detection': asdict(self.run.settings.detection)}
         else:
             status = {'state': 'idle', 'paths': 0, 'last_plan_time_s': 0.0,
                       'last_replan_latency_s': None, 'replan_latencies_s': [],
@@ -508,7 +526,7 @@ class PlannerNode(Node):
         diag = DiagnosticStatus(level=level, name=f'{NODE_NAME}: disentangling',
                                 hardware_id='lbr_iiwa14', message=status['message'])
         diag.values = [KeyValue(key=k, value=str(v)) for k, v in status.items()
-                       if k != 'replan_latencies_s']
+                       if k not in ('replan_latencies_s', 'detection')]
         msg = DiagnosticArray(status=[diag])
         msg.header.stamp = self.get_clock().now().to_msg()
         self.diag_pub.publish(msg)

@@ -29,7 +29,7 @@ planned path.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields, replace
 import json
 from pathlib import Path
 
@@ -37,7 +37,6 @@ import numpy as np
 from probdis_ros.model import FailureMap, iiwa_arm
 from probdis_ros.motion.detector import BlockDetector, DetectorSettings, Verdict
 from probdis_ros.motion.jtc import JtcTrajectory
-from probdis_ros.motion.timing import nearest_segment
 from probdis_ros.planning.disentangle import failure_from_block
 from probdis_ros.ros.bag_source import Bag, BagError
 from probdis_ros.ros.messages import (
@@ -85,6 +84,7 @@ class ReplayResult:
     gaps: list[float] = field(default_factory=list)
     configs: list[np.ndarray] = field(default_factory=list)
     problems: list[str] = field(default_factory=list)
+    settings: DetectorSettings | None = None    # what the detector ran with
 
     def summary(self) -> dict:
         """Return the JSON summary of ``probdis replay --json``."""
@@ -96,11 +96,16 @@ class ReplayResult:
 
 def replay(bag: str | Path, joint_states_topic: str = JOINT_STATES,
            trajectory_topic: str = TRAJECTORY, joint_names: list[str] | None = None,
-           settings: DetectorSettings | None = None, orientation: bool = True) -> ReplayResult:
-    """Replay a bag; raise ReplayError (carrying the partial result) on a damaged bag."""
+           settings: DetectorSettings | None = None, orientation: bool = True,
+           overrides: dict | None = None) -> ReplayResult:
+    """
+    Replay a bag; raise ReplayError (carrying the partial result) on a damaged bag.
+
+    The detector runs with settings, or else with those the recording planner ran with (its
+    status carries them) or the defaults, changed by overrides (e.g. ``{'d_dist': 0.1}``).
+    """
     names = joint_names or JOINTS
     arm = iiwa_arm(with_orientation=orientation)
-    settings = settings or DetectorSettings()
     result = ReplayResult(fmap=FailureMap(arm.task_space))
     try:
         source = Bag(bag)
@@ -123,7 +128,8 @@ def replay(bag: str | Path, joint_states_topic: str = JOINT_STATES,
                   if t.endswith('/probdis_planner/status') and m == 'std_msgs/msg/String'}
         try:
             _run(source, [joint_states_topic, trajectory_topic, *status], trajectory_topic,
-                 status, names, arm, settings, result, source.start_ns * 1e-9)
+                 status, names, arm, settings, result, source.start_ns * 1e-9,
+                 overrides or {})
         except BagError as err:
             raise ReplayError(f'{bag}: {err}', _finish(result)) from None
         except Exception as err:
@@ -142,22 +148,33 @@ def _finish(result: ReplayResult) -> ReplayResult:
 
 
 def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: set[str],
-         names: list[str], arm, settings: DetectorSettings, result: ReplayResult,
-         t0: float) -> None:
+         names: list[str], arm, given: DetectorSettings | None, result: ReplayResult,
+         t0: float, overrides: dict) -> None:
+    # the detector the live planner ran (its status carries it), unless the caller chose one
+    settings = result.settings = given or replace(DetectorSettings(), **overrides)
     measured = None
     measured_velocity = None
     detector = None
     kind = ''
     after_block = False
     last_path_done = False
-    path = None
+    ended = False              # the planner said the run is over: what follows is its stop
+    status_paths: list[int] = []
     for message in source.messages(topics):
         t = message.stamp_ns * 1e-9 - t0
         msg = source.deserialize(message)
         if message.topic in status_topics:
             state = json.loads(msg.data)
+            if given is None and isinstance(state.get('detection'), dict):
+                known = {f.name for f in fields(DetectorSettings)}
+                recorded = {k: v for k, v in state['detection'].items() if k in known}
+                settings = result.settings = DetectorSettings(**{**recorded, **overrides})
             if state.get('state') == 'planning' and state.get('paths') == 0:
                 result.runs += 1
+                status_paths.append(0)
+            if status_paths:
+                status_paths[-1] = max(status_paths[-1], int(state.get('paths', 0)))
+            ended = state.get('state') in ('succeeded', 'gave_up', 'stopped')
             continue
         if message.topic == trajectory_topic:
             if measured is None:
@@ -169,9 +186,9 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
                 result.problems.append(f'{t:.3f} s: command refused: {err}')
                 continue
             timed = JtcTrajectory(command, measured, measured_velocity, t)
-            if len(timed.points) == 2 and np.abs(timed.points[1] - measured).sum() <= \
-                    settings.d_dist:
-                detector, kind = None, 'hold'
+            if ended or (len(timed.points) == 2 and
+                         np.abs(timed.points[1] - measured).sum() <= settings.d_dist):
+                detector, kind = None, 'hold'       # a hold or the stop that ends a run
                 continue
             if after_block:
                 kind, after_block = 'retreat', False
@@ -179,7 +196,6 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
                 kind = 'path'
                 result.paths += 1
                 last_path_done = False
-            path = timed
             detector = BlockDetector(timed, t, settings)
             continue
         try:
@@ -200,13 +216,23 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
                 last_path_done = True
             detector = None
         elif verdict is Verdict.BLOCKED:
+            # the live run's rule: the failure is where the block began, moving the way the
+            # command moved then; a blocked retreat is a block too
+            onset = detector.onset
+            config = onset.config if onset is not None else q
+            when = onset.time if onset is not None else t
+            direction = onset.velocity if onset is not None else np.zeros_like(q)
+            if not np.any(direction):
+                points = detector.path.points
+                segment = detector.path.segment_at(when - detector.start_time)
+                direction = points[segment + 1] - points[segment]
             detector = None
-            if kind != 'path':
+            if not np.any(direction):
                 continue
-            segment = nearest_segment(path.points, q)
-            direction = path.points[segment + 1] - path.points[segment]
-            x, v, quat = failure_from_block(arm, q, direction)
+            x, v, quat = failure_from_block(arm, config, direction)
             result.fmap.add(x, v, quat)
-            result.blocks.append(Block(t, q.copy(), x, segment))
-            after_block = True
+            result.blocks.append(Block(t, config.copy(), x, -1 if kind == 'retreat' else 0))
+            after_block = kind == 'path'
+    if status_paths:
+        result.paths = sum(status_paths)
     result.success = last_path_done

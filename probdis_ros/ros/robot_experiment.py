@@ -52,7 +52,7 @@ def run_robot_experiment(out: Path, scenarios: list[str], methods: list[Method],
                          velocity_scaling: float = 1.0, timeout: float = 600.0,
                          progress: Callable[[str], None] | None = None,
                          engine: str = 'physics', sim_time: bool = True,
-                         real_time_factor: float = 0.0) -> list[dict]:
+                         real_time_factor: float = 5.0) -> list[dict]:
     """
     Run what is missing of scenarios x methods x runs; return every record of DIR.
 

@@ -1,0 +1,118 @@
+# Copyright 2026 probdis_ros contributors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The speed-ups change no plan: compiled loop, pruned failures; and the anytime mode."""
+
+import argparse
+import json
+
+import numpy as np
+from probdis_ros.bench import add_plan_command, straight_path_map
+from probdis_ros.model import arm_for_setting
+from probdis_ros.model.edge_costs import EdgeCoster
+from probdis_ros.model.kernels import farthest_kernel
+from probdis_ros.planning import HardThresholdObjective, ProbRRT, RRTSettings
+from probdis_ros.planning.objectives import FailureProbabilityObjective
+import pytest
+from test_planning import scattered_map
+
+ARM = arm_for_setting('3d-orient')
+
+
+class UnprunedEdgeCoster(EdgeCoster):
+    """The compiled coster evaluating every failure at every point (no bounds)."""
+
+    def __init__(self, arm, fmap, delta=0.04, terms=None) -> None:
+        super().__init__(arm, fmap, delta, terms, prune=False)
+
+
+def same_plans(fast: ProbRRT, slow: ProbRRT, start, goal, fmap, seeds=range(3)) -> None:
+    """Assert the same path (bit for bit) and the same cost for each seed."""
+    for seed in seeds:
+        a = fast.plan(start, goal, fmap, np.random.default_rng(seed))
+        b = slow.plan(start, goal, fmap, np.random.default_rng(seed))
+        assert (a is None) == (b is None)
+        if a is not None:
+            np.testing.assert_array_equal(a.path, b.path)
+            assert a.cost == b.cost and a.tree_sizes == b.tree_sizes
+            assert a.rewires == b.rewires
+
+
+@pytest.mark.parametrize('settings', [
+    RRTSettings(), RRTSettings(rewire_factor=0.0),
+    RRTSettings(iterations=30, closest_candidates=0, connect_candidates=0, rewire_radius=1.5)])
+def test_the_compiled_loop_plans_exactly_as_the_python_loop(settings):
+    rng = np.random.default_rng(21)
+    fmap = scattered_map(ARM, rng, 19)
+    start, goal = ARM.random_configurations(rng, 2)
+    for objective in (FailureProbabilityObjective(), HardThresholdObjective(0.01)):
+        compiled = ProbRRT(ARM, settings, objective)
+        assert compiled.compiled
+        same_plans(compiled, ProbRRT(ARM, settings, objective, compiled=False), start, goal,
+                   fmap)
+
+
+def test_pruning_far_failures_changes_no_cost_and_no_plan():
+    rng = np.random.default_rng(22)
+    for failures in (5, 19, 150):
+        fmap = scattered_map(ARM, rng, failures)
+        sources = ARM.random_configurations(rng, 40)
+        target = ARM.random_configurations(rng, 1)[0]
+        for objective in (FailureProbabilityObjective(), HardThresholdObjective(0.02)):
+            pruned = objective.coster(ARM, fmap)
+            every = objective.coster(ARM, fmap, coster_type=UnprunedEdgeCoster)
+            for toward in (True, False):
+                np.testing.assert_array_equal(pruned.costs(sources, target, toward),
+                                              every.costs(sources, target, toward))
+            assert pruned.cheapest(sources, target) == every.cheapest(sources, target)
+    start, goal, fmap = straight_path_map(19)       # failures along the way
+    same_plans(ProbRRT(ARM), ProbRRT(ARM, coster_type=UnprunedEdgeCoster), start, goal, fmap)
+    fmap = scattered_map(ARM, rng, 150)
+    same_plans(ProbRRT(ARM, RRTSettings(iterations=40)),
+               ProbRRT(ARM, RRTSettings(iterations=40), coster_type=UnprunedEdgeCoster),
+               start, goal, fmap, seeds=range(2))
+
+
+def test_the_anytime_mode_keeps_its_budget_and_its_cost_is_its_path_cost():
+    start, goal, fmap = straight_path_map(19)
+    objective = FailureProbabilityObjective()
+    coster = objective.coster(ARM, fmap)
+    paper = ProbRRT(ARM).plan(start, goal, fmap, np.random.default_rng(0))
+    budget = max(0.3, 3 * paper.plan_time_s)
+    anytime = ProbRRT(ARM, RRTSettings(plan_time=budget)).plan(
+        start, goal, fmap, np.random.default_rng(0))
+    assert anytime.plan_time_s < budget + 0.1 + paper.plan_time_s
+    edges = sum(coster.cost(a, b) for a, b in zip(anytime.path[:-1], anytime.path[1:]))
+    assert anytime.cost == pytest.approx(edges, rel=1e-12)
+    assert anytime.cost < paper.cost
+    assert np.all(ARM.within_limits(anytime.path))
+    np.testing.assert_array_equal(anytime.path[[0, -1]], [start, goal])
+
+
+def test_bench_plan_times_an_empty_a_19_and_a_large_map(capsys):
+    parser = argparse.ArgumentParser()
+    add_plan_command(parser.add_subparsers())
+    args = parser.parse_args(['plan', '--seeds', '1', '--large', '30', '--json'])
+    assert args.handler(args) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert list(doc) == ['median_s_empty_map', 'median_s_19_failures', 'median_s_30_failures']
+    assert all(v > 0 for v in doc.values())
+
+
+def test_the_farthest_sample_is_the_one_of_every_distance():
+    rng = np.random.default_rng(23)
+    for nodes in (1, 7, 120):
+        samples, tree = rng.normal(size=(100, 3)), rng.normal(size=(nodes, 3))
+        d2 = ((samples[:, None, :] - tree[None, :, :]) ** 2).sum(axis=2).min(axis=1)
+        assert farthest_kernel(samples, tree) == int(np.argmax(d2))
