@@ -53,10 +53,10 @@ from probdis_ros.motion.jtc import CONTROLLER_RATE, JtcTrajectory, TrajectoryCom
 from probdis_ros.motion.profiles import (
     DEFAULT_ACCELERATION,
     DEFAULT_JERK,
+    from_state,
     Motion,
     MotionLimits,
     stop,
-    time_parameterize,
 )
 from probdis_ros.planning.disentangle import Disentangler, State
 
@@ -279,11 +279,10 @@ class Run:
             self.phase = Phase.PLANNING
             self._emit(PlanFrom(self.measured.copy()))
             return
-        path[0] = self.measured
         if not self.arm.within_limits(path).all():
             self.finish(State.STOPPED, 'planned path leaves the joint limits; not sent')
             return
-        motion = time_parameterize(path, self.limits)
+        motion = from_state(self.measured, self.measured_velocity, path, self.limits)
         now = self._time()
         if self.block_time is not None:
             waited = (self.retreat_sent - self.block_time) + max(
@@ -333,7 +332,7 @@ class Run:
         self.block_time = now
         # from where the arm is, through where the block began, back the way it came
         retreat = np.vstack([self.measured, back])
-        self._send(time_parameterize(retreat, self.limits))
+        self._send(from_state(self.measured, self.measured_velocity, retreat, self.limits))
         self.retreat_sent = self._time()
         self.phase = Phase.RETREATING
         self.retreat_done_at = None

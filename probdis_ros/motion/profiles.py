@@ -422,3 +422,32 @@ def stop(q: np.ndarray, v: np.ndarray, a: np.ndarray, limits: MotionLimits | Non
     positions = np.clip(positions, lower, upper)   # by ROUNDING unless overload is inf
     return Motion(times, positions, velocities, accelerations,
                   np.array([0.0, times[-1]]), overload, period)
+
+
+def from_state(q: np.ndarray, v: np.ndarray | None, path: np.ndarray,
+               limits: MotionLimits | None = None, period: float = PERIOD,
+               still: float = 1e-3) -> Motion:
+    """
+    Return a path's motion from the arm's state (q, v): first brought to rest, then the path.
+
+    JTC starts every new command from the measured state; a path timed from rest, sent while
+    the arm still moves (a block declared by a gap ceiling mid-motion), would make JTC brake
+    within one controller period.  Below ``still`` rad/s (L1) on every joint the arm counts
+    as at rest and the path starts at q; otherwise a stop (within the limits) comes first and
+    the path starts where it ends.  ``via_times`` are the path's, shifted by the stop.
+    """
+    q = np.asarray(q, dtype=float)
+    path = np.array(path, dtype=float)
+    if v is None or np.abs(v).sum() < still:
+        path[0] = q
+        return time_parameterize(path, limits, period)
+    brake = stop(q, np.asarray(v, dtype=float), np.zeros_like(q), limits, period)
+    path[0] = brake.positions[-1]
+    rest = time_parameterize(path, limits, period)
+    shift = brake.duration
+    return Motion(times=np.concatenate([brake.times, shift + rest.times[1:]]),
+                  positions=np.vstack([brake.positions, rest.positions[1:]]),
+                  velocities=np.vstack([brake.velocities, rest.velocities[1:]]),
+                  accelerations=np.vstack([brake.accelerations, rest.accelerations[1:]]),
+                  via_times=shift + rest.via_times, overload=brake.overload, period=period)
+

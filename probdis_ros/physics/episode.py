@@ -93,7 +93,8 @@ def run_physics_episode(scene: str, method: str | Method = 'probabilistic', seed
             action = run.actions.pop(0)
             if isinstance(action, Send):
                 robot.command(action.command)
-                commands.append((robot.time, action.command))
+                seen = robot.joint_state()      # what JTC will start the command from
+                commands.append((robot.time, action.command, seen.position, seen.velocity))
             elif isinstance(action, PlanFrom):
                 run.on_plan(loop.next_path(action.config))
             elif isinstance(action, Learned):
