@@ -384,25 +384,6 @@ def cmd_plan(args: argparse.Namespace) -> int:
     return 0
 
 
-def cmd_bench_plan(args: argparse.Namespace) -> int:
-    """Time ProbRRT on the iiwa with orientation, empty map and 19 failures."""
-    from probdis_ros.bench import bench_plan
-
-    result = bench_plan(args.seeds)
-    if args.json:
-        _print_json({'median_s_empty_map': result['median_s_empty_map'],
-                     'median_s_19_failures': result['median_s_19_failures']})
-    else:
-        print(f'ProbRRT plan, iiwa with orientation, paper parameters, one thread, '
-              f'median of {args.seeds} seeds:')
-        print(f'  empty map:    {result["median_s_empty_map"]:.3f} s')
-        print(f'  19 failures:  {result["median_s_19_failures"]:.3f} s')
-        print(f'RRT* re-parentings per plan: {result["rewires_per_plan_empty_map"]:.1f} '
-              f'(empty map), {result["rewires_per_plan_19_failures"]:.1f} (19 failures)')
-        print(f'machine: {result["machine"]}')
-    return 0
-
-
 def cmd_node(args: argparse.Namespace) -> int:
     """Run the planner or the mock iiwa node; ROS arguments pass through."""
     if args.command == 'planner':
@@ -489,15 +470,15 @@ def _plot_bag(scene_name: str, bag: str, out: str) -> Path:
 
 def cmd_replay(args: argparse.Namespace) -> int:
     """Rerun the blocked-motion detector on a bag; rebuild the failure map."""
-    from probdis_ros.motion.detector import DetectorSettings
     from probdis_ros.ros.replay import replay, ReplayError
 
     if args.publish:
         return _publish_bag(args)
-    settings = DetectorSettings(d_dist=args.d_dist)
+    overrides = {k: v for k, v in (('d_dist', args.d_dist), ('motion_delay', args.motion_delay))
+                 if v is not None}
     status = 0
     try:
-        result = replay(args.bag, args.joint_states, args.trajectory, settings=settings)
+        result = replay(args.bag, args.joint_states, args.trajectory, overrides=overrides)
     except ReplayError as err:
         if err.partial is None:
             raise UsageError(str(err)) from None
@@ -508,7 +489,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
     if args.plot:
         from probdis_ros.plots import plot_replay
 
-        plot_replay(result, args.plot, args.d_dist)
+        plot_replay(result, args.plot, result.settings.d_dist)
     if args.json:
         _print_json(result.summary())
         return status
@@ -583,11 +564,10 @@ def build_parser() -> argparse.ArgumentParser:
     bfk.add_argument('--json', action='store_true', help='print {"configs_per_s": float}')
     bfk.set_defaults(handler=cmd_bench_fk)
 
-    bplan = bench_sub.add_parser('plan', help='ProbRRT planning time, empty map and 19 failures')
-    bplan.add_argument('--seeds', type=_positive_int, default=20, help='plans per map')
-    bplan.add_argument('--json', action='store_true',
-                       help='print {"median_s_empty_map": float, "median_s_19_failures": float}')
-    bplan.set_defaults(handler=cmd_bench_plan)
+    from probdis_ros.bench import add_plan_command, add_quality_command
+
+    add_plan_command(bench_sub)
+    add_quality_command(bench_sub)
     bphys = bench_sub.add_parser('physics', help='the physics mock: real-time factor, '
                                  'free-motion tracking gap, a block (contact force, delay)')
     bphys.add_argument('--scene', default='demo_hook', help='scene file or name')
@@ -688,7 +668,10 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument('--joint-states', default='/lbr/joint_states', help='joint-state topic')
     rp.add_argument('--trajectory', default='/lbr/joint_trajectory_controller/joint_trajectory',
                     help='commanded trajectory topic')
-    rp.add_argument('--d-dist', type=float, default=0.04, help='d_dist of the detector [rad]')
+    rp.add_argument('--d-dist', type=float, help='d_dist of the detector [rad] (default: the '
+                    'detector settings the recording planner ran with, or the defaults)')
+    rp.add_argument('--motion-delay', type=float, help='how far the arm lags its command [s] '
+                    '(default: as the recording planner ran)')
     rp.add_argument('--json', action='store_true',
                     help='print {"paths", "blocks": [{"t", "x"}], "failures", "success"}')
     rp.add_argument('--plot', metavar='OUT.png', help='joint gaps and the flange path')
@@ -754,9 +737,9 @@ def build_parser() -> argparse.ArgumentParser:
                        help='the mock arm: MuJoCo in joint impedance, or the idealised one')
     robot.add_argument('--sim-time', action=argparse.BooleanOptionalAction, default=True,
                        help='run the mock on simulated time (/clock), faster than real time')
-    robot.add_argument('--real-time-factor', type=float, default=0.0,
-                       help='with --sim-time: speed over the wall clock; 0: as fast as the '
-                       'planner keeps up')
+    robot.add_argument('--real-time-factor', type=float, default=5.0,
+                       help='with --sim-time: speed over the wall clock (at most); 0: as fast '
+                       'as the mock can (commands may then be taken late)')
     robot.add_argument('--methods', default='epsilon:0.2,hard:0.01,probabilistic',
                        help='comma-separated probabilistic[:C_FAIL], hard:Y[:C_HARD], epsilon:X')
     robot.add_argument('--out', default='results/robot', help='directory of robot_runs.jsonl '

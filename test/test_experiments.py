@@ -21,13 +21,22 @@ from pathlib import Path
 import signal
 import subprocess
 import time
+import zlib
 
 from conftest import probdis_command
 import numpy as np
-from probdis_ros.experiments.report import bootstrap_ci, claims, summarise, write_report
+from probdis_ros.experiments.report import (
+    bootstrap_ci,
+    claims,
+    family_table,
+    markdown_table,
+    summarise,
+    write_report,
+)
 from probdis_ros.experiments.sweep import (
     episode_keys,
     EPISODES_FILE,
+    family_keys,
     Method,
     read_episodes,
     run_sweep,
@@ -113,6 +122,41 @@ def test_a_sweep_of_another_seed_is_refused_in_the_same_directory(tmp_path):
     other = episode_keys(['2d'], [1], 1, [Method.parse('epsilon:0.2')], 1)
     with pytest.raises(ValueError, match='another sweep'):
         run_sweep(other, tmp_path, workers=1)
+    # nor one whose planner settings differ (an ablation of K belongs in its own directory)
+    with pytest.raises(ValueError, match="planner defaults"):
+        run_sweep(keys, tmp_path, workers=1, rrt={'iterations': 400})
+
+
+def test_family_worlds_are_seeds_from_the_sweep_seed_and_go_world_by_world():
+    methods = [Method.parse('probabilistic'), Method.parse('epsilon:0.2')]
+    keys = family_keys(['open_box', 'clutter'], 3, methods, 1000)
+    assert [k.name for k in keys[:4]] == ['open_box/0/probabilistic', 'open_box/0/epsilon:0.2',
+                                          'clutter/0/probabilistic', 'clutter/0/epsilon:0.2']
+    assert {(k.family, k.world, k.world_seed) for k in keys} == {
+        (f, w, 1000 + w) for f in ('open_box', 'clutter') for w in range(3)}
+    assert all(k.setting == '3d-orient' for k in keys)
+    # the settings' seeds are unchanged by the families (same hash as before)
+    assert episode_keys(['2d'], [1], 1, methods[:1], 3)[0].world_seed == zlib.crc32(b'3/2d/1/0')
+
+
+def test_the_report_groups_families_apart_from_settings():
+    def record(family, method, success, paths):
+        return {'setting': '3d-orient', 'obstacles': 0, 'method': method, 'max_paths': 20,
+                'success': success, 'paths': paths, 'plan_times_s': [0.1] * paths,
+                'wall_s': 1.0, 'empty_plans': 0, **({'family': family} if family else {})}
+
+    summary = summarise([record('open_box', 'probabilistic', True, 2),
+                         record('open_box', 'probabilistic', False, 20),
+                         record('clutter', 'probabilistic', True, 4),
+                         record('', 'probabilistic', True, 1)])
+    cells = {(c.get('family'), c['method']): c for c in summary['cells']}
+    assert cells[('open_box', 'probabilistic')]['success'] == 0.5
+    assert cells[('open_box', 'probabilistic')]['mean_paths_successful'] == 2
+    assert cells[(None, 'probabilistic')]['episodes'] == 1
+    rows = family_table(summary).splitlines()[2:]
+    assert [r.split(' | ')[0] for r in rows] == ['| open_box', '| clutter']
+    assert len(markdown_table(summary).splitlines()) == 3     # the setting cell only
+    assert [b['obstacles'] for b in claims(summary)['beats_every_baseline']] == []
 
 
 def test_the_bootstrap_interval_matches_the_exact_bootstrap_distribution():

@@ -22,7 +22,9 @@ episodes; the planning time per path; the share of the paths that were empty pla
 feasible path found, the arm did not move; records older than that count are shown as
 unknown).  Written as ``success.png`` (like the paper's Fig. 4),
 ``sensitivity.png`` (success at the maximum, like its Fig. 5), ``summary.json`` and
-``summary.md``.
+``summary.md``.  Episodes of entanglement families (``sweep --family``) are grouped by family
+and method instead, tabled apart and drawn in ``families.png``, a panel per family; the
+figures of the settings are written only where the directory holds settings.
 """
 
 from __future__ import annotations
@@ -71,12 +73,13 @@ def success_curve(records: list[dict], max_paths: int) -> dict:
 
 
 def summarise(records: list[dict]) -> dict:
-    """Group episodes by setting, obstacle count and method; compute every figure."""
+    """Group episodes by family or setting and obstacle count, and method; compute figures."""
     groups: dict[tuple, list[dict]] = defaultdict(list)
     for record in records:
-        groups[(record['setting'], record['obstacles'], record['method'])].append(record)
+        groups[(record.get('family', ''), record['setting'], record['obstacles'],
+                record['method'])].append(record)
     cells = []
-    for (setting, obstacles, method), group in sorted(groups.items()):
+    for (family, setting, obstacles, method), group in sorted(groups.items()):
         max_paths = group[0]['max_paths']
         curve = success_curve(group, max_paths)
         wins = [r['paths'] for r in group if r['success']]
@@ -85,6 +88,7 @@ def summarise(records: list[dict]) -> dict:
         paths = sum(r['paths'] for r in counted)
         cells.append({
             'setting': setting, 'obstacles': obstacles, 'method': method,
+            **({'family': family} if family else {}),
             'episodes': len(group), 'max_paths': max_paths,
             'success': curve['rate'][-1], 'ci95': [curve['low'][-1], curve['high'][-1]],
             'curve': curve,
@@ -98,8 +102,56 @@ def summarise(records: list[dict]) -> dict:
                           'level': 0.95}}
 
 
+def _settings(summary: dict) -> dict:
+    """Return the summary with the cells of the paper's settings only."""
+    return {**summary, 'cells': [c for c in summary['cells'] if not c.get('family')]}
+
+
+def _method_order(method: str) -> tuple:
+    return (method.split(':')[0] != 'probabilistic', method)
+
+
+def family_cells(summary: dict) -> list[dict]:
+    """Return the cells of entanglement families, in the benchmark's order of families."""
+    from probdis_ros.sim.families import FAMILIES
+
+    cells = [c for c in summary['cells'] if c.get('family')]
+    rank = {f: k for k, f in enumerate(FAMILIES)}
+    return sorted(cells, key=lambda c: (rank.get(c['family'], len(rank)), c['family'],
+                                        _method_order(c['method'])))
+
+
+def family_table(summary: dict) -> str:
+    """Return the family cells as a Markdown table (one row per family and method)."""
+    lines = ['| family | method | worlds | success within max paths (95 % CI) '
+             '| mean paths when successful | empty plans / paths '
+             '| median plan time per path [s] |',
+             '| --- | --- | --- | --- | --- | --- | --- |']
+    for c in family_cells(summary):
+        paths = '-' if c['mean_paths_successful'] is None else \
+            f'{c["mean_paths_successful"]:.1f}'
+        plan = '-' if c['plan_time_s_median'] is None else f'{c["plan_time_s_median"]:.3f}'
+        share = c.get('empty_plan_share')
+        empty = '?' if share is None else f'{share:.2f}'
+        lines.append(f'| {c["family"]} | {c["method"]} | {c["episodes"]} | '
+                     f'{c["success"]:.2f} ({c["ci95"][0]:.2f}-{c["ci95"][1]:.2f}) | '
+                     f'{paths} | {empty} | {plan} |')
+    return '\n'.join(lines) + '\n'
+
+
+def markdown_tables(summary: dict) -> str:
+    """Return the tables of whatever the summary holds: settings, families, or both."""
+    parts = []
+    if _settings(summary)['cells']:
+        parts.append(markdown_table(summary))
+    if family_cells(summary):
+        parts.append(family_table(summary))
+    return '\n'.join(parts)
+
+
 def markdown_table(summary: dict) -> str:
-    """Return the summary as a Markdown table (one row per setting, obstacles, method)."""
+    """Return the settings' cells as a Markdown table (a row per setting, obstacles, method)."""
+    summary = _settings(summary)
     lines = ['| setting | obstacles | method | episodes | success (95 % CI) '
              '| mean paths when successful | empty plans / paths '
              '| median plan time per path [s] |',
@@ -129,7 +181,7 @@ def claims(summary: dict) -> dict:
        between its values.
     """
     cells: dict[tuple, dict[str, dict]] = defaultdict(dict)
-    for c in summary['cells']:
+    for c in _settings(summary)['cells']:
         cells[(c['setting'], c['obstacles'])][c['method']] = c
     beats = []
     for (setting, obstacles), methods in sorted(cells.items()):
@@ -185,8 +237,47 @@ def claims_markdown(verdicts: dict) -> str:
     return '\n'.join(lines) + '\n'
 
 
+def plot_family_curves(summary: dict, out: str | Path) -> Path:
+    """Draw success within n paths per method, a panel per entanglement family."""
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    from probdis_ros.plots import _legend_below, _save
+
+    cells = family_cells(summary)
+    families = list(dict.fromkeys(c['family'] for c in cells))
+    methods = sorted({c['method'] for c in cells}, key=_method_order)
+    fig, axes = plt.subplots(1, len(families), squeeze=False, sharey=True,
+                             figsize=(3.2 * len(families), 2.8))
+    for cell in cells:
+        ax = axes[0, families.index(cell['family'])]
+        color = plt.cm.tab10(methods.index(cell['method']))
+        n = np.arange(1, cell['max_paths'] + 1)
+        ax.step(n, cell['curve']['rate'], where='post', color=color, lw=1.5,
+                label=cell['method'])
+        ax.fill_between(n, cell['curve']['low'], cell['curve']['high'], step='post',
+                        color=color, alpha=0.15, lw=0)
+    for k, family in enumerate(families):
+        ax = axes[0, k]
+        worlds = max(c['episodes'] for c in cells if c['family'] == family)
+        ax.set_title(f'{family} ({worlds} worlds)', fontsize=9)
+        ax.set_ylim(0, 1.02)
+        ax.grid(alpha=0.3)
+        ax.set_xlabel('max. planned paths')
+    axes[0, 0].set_ylabel('success rate')
+    fig.suptitle('entanglement families: success within n paths '
+                 '(bands: 95 % bootstrap CI over worlds)', y=1.0)
+    fig.tight_layout()
+    _legend_below(fig, axes, methods)
+    return _save(fig, out)
+
+
 def write_report(directory: str | Path) -> dict:
-    """Read DIR/episodes.jsonl; write the PNGs, summary.json and summary.md into DIR."""
+    """
+    Read DIR/episodes.jsonl; write the figures, summary.json and summary.md into DIR.
+
+    The summary's ``files`` names what was written.
+    """
     from probdis_ros.plots import plot_sensitivity, plot_success_curves
 
     directory = Path(directory)
@@ -196,9 +287,19 @@ def write_report(directory: str | Path) -> dict:
                          'sweep first)')
     summary = summarise(records)
     summary['claims'] = claims(summary)
+    files = []
+    settings = _settings(summary)
+    text = []
+    if settings['cells']:
+        text += [markdown_table(summary), claims_markdown(summary['claims'])]
+        plot_success_curves(settings, directory / 'success.png')
+        plot_sensitivity(settings, directory / 'sensitivity.png')
+        files += ['success.png', 'sensitivity.png']
+    if family_cells(summary):
+        text.append(family_table(summary))
+        plot_family_curves(summary, directory / 'families.png')
+        files.append('families.png')
+    summary['files'] = [*files, 'summary.json', 'summary.md']
     (directory / 'summary.json').write_text(json.dumps(summary, indent=1) + '\n')
-    (directory / 'summary.md').write_text(markdown_table(summary) + '\n' +
-                                          claims_markdown(summary['claims']))
-    plot_success_curves(summary, directory / 'success.png')
-    plot_sensitivity(summary, directory / 'sensitivity.png')
+    (directory / 'summary.md').write_text('\n'.join(text))
     return summary

@@ -25,6 +25,11 @@ synced); a rerun of the same command reads the file, drops a line cut short by a
 runs only what is missing, so an interrupted sweep loses at most the episodes that were
 running.
 
+Entanglement families (``--family``, :mod:`probdis_ros.sim.families`) run the same way; their
+world ``w`` of a sweep of seed ``s`` is the family world of seed ``s + w``, so ``--seed 0
+--worlds 100`` is the evaluation set (seeds 0-99) and ``--seed 1000`` a training set, and
+the world seed is also the loop's seed (its planner stream is independent of the world's).
+
 The scheduler is a LocalCluster of single-threaded worker processes by default, or any
 running Dask scheduler (``--scheduler tcp://host:8786``): the work is plain functions of
 plain arguments, so a lab cluster runs it unchanged.
@@ -56,16 +61,21 @@ class EpisodeKey:
     world: int
     method: str
     sweep_seed: int
+    family: str = ''           # an entanglement family instead of a random setting world
 
     @property
     def world_seed(self) -> int:
         """Return the seed of the world and of the loop (their own streams of it)."""
+        if self.family:
+            return self.sweep_seed + self.world
         text = f'{self.sweep_seed}/{self.setting}/{self.obstacles}/{self.world}'
         return zlib.crc32(text.encode())
 
     @property
     def name(self) -> str:
-        """Identify the episode within its sweep: setting/obstacles/world/method."""
+        """Identify the episode: setting/obstacles/world/method, or family/world/method."""
+        if self.family:
+            return f'{self.family}/{self.world}/{self.method}'
         return f'{self.setting}/{self.obstacles}/{self.world}/{self.method}'
 
 
@@ -76,20 +86,37 @@ def episode_keys(settings: Iterable[str], obstacles: Iterable[int], worlds: int,
             for w in range(worlds) for m in methods]
 
 
-def run_episode_record(key: EpisodeKey, max_paths: int) -> dict:
+def family_keys(families: Iterable[str], worlds: int, methods: Iterable[Method],
+                seed: int) -> list[EpisodeKey]:
+    """
+    Return every episode of a family sweep: worlds of seeds seed..seed+worlds-1.
+
+    World by world across the families, so that a partial sweep has as many worlds of each.
+    """
+    from probdis_ros.sim.families import SETTING
+
+    return [EpisodeKey(SETTING, 0, w, str(m), seed, family) for w in range(worlds)
+            for family in families for m in methods]
+
+
+def run_episode_record(key: EpisodeKey, max_paths: int, rrt: dict | None = None) -> dict:
     """Run one episode (in a worker) and return its JSON record."""
+    from probdis_ros.planning.prob_rrt import RRTSettings
     from probdis_ros.sim.episode import run_episode
 
     cpu0 = time.process_time()
     method = Method.parse(key.method)
-    world = _world(key.setting, key.obstacles, key.world_seed)
+    world = _world(key.family or key.setting, key.obstacles, key.world_seed)
     t0 = time.perf_counter()
-    result = run_episode(world, method, seed=key.world_seed, max_paths=max_paths)
+    result = run_episode(world, method, seed=key.world_seed, max_paths=max_paths,
+                         settings=RRTSettings(**rrt) if rrt else None)
     return {**asdict(key), 'id': key.name, 'world_seed': key.world_seed,
             'success': result.success, 'paths': result.paths, 'failures': result.failures,
             'empty_plans': result.empty_plans,
             'max_paths': max_paths, 'plan_times_s': result.plan_times_s,
+            **({'rrt': rrt} if rrt else {}),
             'wall_s': time.perf_counter() - t0, 'rejected_draws': world.rejected_draws,
+            'world_obstacles': len(world.obstacles),
             # CPU time of the worker (world drawn here included): what the sweep costs
             # regardless of what else the machine was doing
             'cpu_s': time.process_time() - cpu0}
@@ -99,14 +126,16 @@ _WORLDS: dict = {}
 
 
 def _world(setting: str, obstacles: int, seed: int):
-    """Draw a world once per worker process (the methods of a world share it)."""
+    """Draw a world (of a setting or a family) once per worker process (methods share it)."""
+    from probdis_ros.sim.families import FAMILIES, random_family_world
     from probdis_ros.sim.worlds import random_world
 
     key = (setting, obstacles, seed)
     if key not in _WORLDS:
         if len(_WORLDS) > 64:
             _WORLDS.clear()
-        _WORLDS[key] = random_world(setting, obstacles, seed)
+        _WORLDS[key] = random_family_world(setting, seed) if setting in FAMILIES else \
+            random_world(setting, obstacles, seed)
     return _WORLDS[key]
 
 
@@ -157,8 +186,15 @@ class SweepReport:
 
 def run_sweep(keys: list[EpisodeKey], out: Path, max_paths: int = 20,
               scheduler: str | None = None, workers: int | None = None,
-              progress: Callable[[int, int, float], None] | None = None) -> SweepReport:
-    """Run the episodes of ``keys`` not yet in ``out/episodes.jsonl``; append each at once."""
+              progress: Callable[[int, int, float], None] | None = None,
+              rrt: dict | None = None) -> SweepReport:
+    """
+    Run the episodes of ``keys`` not yet in ``out/episodes.jsonl``; append each at once.
+
+    ``rrt`` overrides fields of the planner's RRTSettings (``iterations``, ``plan_time``) for
+    every episode (ablations; the paper's settings without); it is kept in each record, and
+    a directory holds one sweep's settings only.
+    """
     from dask.distributed import as_completed, Client, LocalCluster
 
     out.mkdir(parents=True, exist_ok=True)
@@ -166,10 +202,12 @@ def run_sweep(keys: list[EpisodeKey], out: Path, max_paths: int = 20,
     records = read_episodes(path, repair=True)
     seeds = {keys[0].sweep_seed} if keys else set()
     for record in records:
-        if {record.get('sweep_seed')} != seeds or record.get('max_paths') != max_paths:
+        if {record.get('sweep_seed')} != seeds or record.get('max_paths') != max_paths or \
+                record.get('rrt', {}) != (rrt or {}):
             raise ValueError(f'{path} holds episodes of another sweep (seed '
                              f'{record.get("sweep_seed")}, --max-paths '
-                             f'{record.get("max_paths")}); use another --out')
+                             f'{record.get("max_paths")}, planner '
+                             f'{record.get("rrt", "defaults")}); use another --out')
     done = {r['id'] for r in records}
     todo = [k for k in keys if k.name not in done]
     t0 = time.monotonic()
@@ -183,8 +221,9 @@ def run_sweep(keys: list[EpisodeKey], out: Path, max_paths: int = 20,
                                processes=True, dashboard_address=None, host='127.0.0.1')
         client = Client(cluster)
     try:
-        futures = [client.submit(run_episode_record, key, max_paths, key=f'episode-{key.name}-'
-                                 f'{key.sweep_seed}-{max_paths}', pure=False) for key in todo]
+        futures = [client.submit(run_episode_record, key, max_paths, rrt,
+                                 key=f'episode-{key.name}-{key.sweep_seed}-{max_paths}',
+                                 pure=False) for key in todo]
         with path.open('a') as stream:
             for finished, future in enumerate(as_completed(futures), start=1):
                 stream.write(json.dumps(future.result()) + '\n')
