@@ -311,18 +311,38 @@ class Run:
         else:
             self._plan_from(config)
 
-    def _onset(self, detector: BlockDetector, now: float) -> tuple[np.ndarray, int]:
-        """Return where the block began and the edge of the running motion it began on."""
+    def _onset(self, detector: BlockDetector, now: float
+               ) -> tuple[np.ndarray, int, np.ndarray]:
+        """
+        Return where the block began, the motion's edge it began on, and the joint direction.
+
+        The direction is the command's velocity then; where that is zero (a block at rest),
+        the edge's, or the first edge of the motion that has a length.
+        """
         onset = detector.onset
         config, when = (onset.config, onset.time) if onset is not None else \
             (self.measured, now)
         elapsed = when - self.trajectory.taken_at - self.settings.detection.motion_delay
-        return config.copy(), self.motion.segment_at(max(elapsed, 0.0))
+        segment = self.motion.segment_at(max(elapsed, 0.0))
+        direction = onset.velocity if onset is not None else np.zeros_like(config)
+        via = self.motion.positions[np.searchsorted(self.motion.times, self.motion.via_times)]
+        edges = np.diff(via, axis=0)
+        order = [segment, *range(segment + 1, len(edges)), *range(segment - 1, -1, -1)]
+        for k in order if not np.any(direction) else ():
+            if np.any(edges[k]):
+                direction = edges[k]
+                break
+        return config.copy(), segment, np.asarray(direction, dtype=float)
 
     def _blocked(self, detector: BlockDetector, now: float) -> None:
-        config, segment = self._onset(detector, now)
+        config, segment, _ = self._onset(detector, now)
         path = self.loop.attempts[-1].path
         segment = int(np.clip(segment, 0, len(path) - 2))
+        # an edge of no length has no direction: the block is on the next one that moves
+        lengths = np.abs(np.diff(path, axis=0)).sum(axis=1)
+        moving = np.flatnonzero(lengths > 0)
+        if len(moving) and lengths[segment] == 0:
+            segment = int(moving[np.argmin(np.abs(moving - segment))])
         back = self.loop.report_blocked(config, segment)
         fmap = self.loop.fmap
         self._emit(Learned({'t': now, 'x': fmap.points[-1].tolist(),
@@ -349,11 +369,11 @@ class Run:
 
     def _retreat_blocked(self, detector: BlockDetector, now: float) -> None:
         """A retreat was blocked: learn it like any block; the next plan starts here."""
-        config, segment = self._onset(detector, now)
-        via = self.motion.positions[np.searchsorted(self.motion.times,
-                                                    self.motion.via_times)]
-        segment = int(np.clip(segment, 0, len(via) - 2))
-        self.loop.learn(config, via[segment + 1] - via[segment])
+        config, _, direction = self._onset(detector, now)
+        if not np.any(direction):
+            self.message = f'retreat blocked ({detector.reason}) at rest: nothing to learn'
+            return
+        self.loop.learn(config, direction)
         fmap = self.loop.fmap
         self._emit(Learned({'t': now, 'x': fmap.points[-1].tolist(),
                             'v': fmap.directions[-1].tolist(),

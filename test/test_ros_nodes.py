@@ -324,3 +324,19 @@ def test_a_killed_planner_gets_its_map_back(ros, tmp_path):
     finally:
         second.send_signal(signal.SIGINT)
         assert second.wait(10) == 0
+
+
+def test_a_fault_inside_the_run_stops_the_arm_and_the_node_lives_on(ros, tmp_path):
+    node = planner(ros, tmp_path)
+    steady_states(ros)
+    wait_for(lambda: ros.call('start').success, 10, 'start')
+
+    def broken(*args):
+        raise ValueError('injected fault')
+    node.run.on_joint_state = broken
+    wait_for(lambda: finished(ros), 5, 'the run to stop')
+    assert ros.status['state'] == 'stopped' and 'internal error' in ros.status['message']
+    last = ros.trajectories[-1][1]
+    assert np.allclose(last.points[-1].positions, START) and \
+        np.allclose(last.points[-1].velocities, 0.0)
+    assert ros.call('start').success          # alive, and ready for the next run

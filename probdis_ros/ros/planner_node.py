@@ -44,7 +44,7 @@ from probdis_ros.model import FailureMap, FailureMapError, iiwa_arm
 from probdis_ros.model.failure_map import write_document
 from probdis_ros.motion.detector import DetectorSettings
 from probdis_ros.motion.timing import hold_command
-from probdis_ros.planning import Disentangler, Method, METHODS, RRTSettings
+from probdis_ros.planning import Disentangler, Method, METHODS, RRTSettings, State
 from probdis_ros.ros.markers import markers_msg
 from probdis_ros.ros.messages import (
     BadJointStateError,
@@ -333,8 +333,7 @@ class PlannerNode(Node):
                                detection=detection)
         self.run = Run(self.arm, loop, settings, clock=self._now)
         self._open_bag()
-        self.run.start(self.measured_at, self.measured)
-        self._act()
+        self._guarded(self.run.start, self.measured_at, self.measured)
         return True, f'disentangling from {np.round(self.measured, 3).tolist()}'
 
     # -- recording -----------------------------------------------------------------------
@@ -404,8 +403,7 @@ class PlannerNode(Node):
                                                      self.joint_names))
             response.success, response.message = True, 'no run active; holding'
             return response
-        self.run.stop('stopped on request')
-        self._act()
+        self._guarded(self.run.stop, 'stopped on request')
         response.success, response.message = True, 'stopped; holding the measured position'
         return response
 
@@ -463,17 +461,16 @@ class PlannerNode(Node):
             self._close_bag()
         if self.run is None:
             return
-        self.run.tick(now)
+        self._guarded(self.run.tick, now)
         if self.plan_future is not None and self.plan_future.done():
             future, self.plan_future = self.plan_future, None
             try:
                 path = future.result()
             except Exception as err:   # a planner bug must not leave the arm moving
                 self.get_logger().error(f'planning failed: {err!r}')
-                self.run.plan_failed(err)
+                self._guarded(self.run.plan_failed, err)
             else:
-                self.run.on_plan(path)
-        self._act()
+                self._guarded(self.run.on_plan, path)
 
     def _on_joint_state(self, data: bytes, info: dict) -> None:
         try:
@@ -494,13 +491,22 @@ class PlannerNode(Node):
             self.get_logger().error(f'joint state refused: {err}',
                                     throttle_duration_sec=1.0)
             if self.run is not None:
-                self.run.bad_joint_state(str(err))
-                self._act()
+                self._guarded(self.run.bad_joint_state, str(err))
             return
         self.measured, self.measured_at = q, now
         if self.run is not None:
-            self.run.on_joint_state(now, q, joint_velocities(msg, self.joint_names))
-            self._act()
+            self._guarded(self.run.on_joint_state, now, q,
+                          joint_velocities(msg, self.joint_names))
+
+    def _guarded(self, event, *args) -> None:
+        """Feed the run an event; a bug in it stops the run safely instead of the node."""
+        try:
+            event(*args)
+        except Exception as err:        # the arm must never be left moving unsupervised
+            self.get_logger().error(f'run failed: {err!r}; stopping the arm')
+            self.run.actions.clear()
+            self.run.finish(State.STOPPED, f'internal error: {err}')
+        self._act()
 
     # -- reporting ---------------------------------------------------------------------
 
