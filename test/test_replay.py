@@ -149,6 +149,16 @@ def test_replay_finds_the_block_in_both_storage_formats(tmp_path, version, plugi
     assert t_stop + 0.3 - 0.02 <= block.t <= t_stop + 0.3 + 0.02
 
 
+def test_a_command_recorded_before_the_first_joint_state_starts_from_the_first_one(tmp_path):
+    messages, stop, _ = simulated_run()
+    assert messages[0][1] == JS and messages[1][1] == TRAJ
+    write_bag(tmp_path / 'bag', messages[1:], *FORMATS[0])     # the command comes first
+    result = replay(tmp_path / 'bag')
+    assert result.paths == 1 and len(result.blocks) == 1
+    assert any('before any joint state' in p for p in result.problems)
+    assert np.linalg.norm(result.blocks[0].x - iiwa_arm().fk(stop).positions[0]) < 0.02
+
+
 def test_replay_refuses_bad_bags_clearly(tmp_path):
     with pytest.raises(ReplayError, match='no such bag'):
         replay(tmp_path / 'missing')

@@ -186,7 +186,11 @@ def test_a_full_run_against_the_physics_mock_learns_and_persists_failures(ros, t
     status = ros.status
     assert status['state'] == 'succeeded', status
     assert status['paths'] >= 2 and status['failures'] >= 1
-    assert len(FailureMap.load(tmp_path / 'map.json')) == status['failures']
+    # a finished run leaves its map beside its bag; the next run starts from an empty one
+    beside = Path(status['bag']) / 'failure_map.json'
+    wait_for(lambda: beside.exists(), 5, 'the map beside the bag')
+    assert len(FailureMap.load(beside)) == status['failures']
+    assert len(FailureMap.load(tmp_path / 'map.json')) == 0
     for _, msg in ros.trajectories:
         times = [p.time_from_start.sec + p.time_from_start.nanosec * 1e-9 for p in msg.points]
         assert all(b > a for a, b in itertools.pairwise(times))
@@ -340,3 +344,15 @@ def test_a_fault_inside_the_run_stops_the_arm_and_the_node_lives_on(ros, tmp_pat
     assert np.allclose(last.points[-1].positions, START) and \
         np.allclose(last.points[-1].velocities, 0.0)
     assert ros.call('start').success          # alive, and ready for the next run
+
+
+def test_an_interrupted_run_keeps_its_map_for_the_next_start(ros, tmp_path):
+    node = planner(ros, tmp_path)
+    fmap = FailureMap(node.arm.task_space)
+    fmap.add(np.array([0.5, 0.0, 0.5]), np.array([0.0, 0.0, 1.0]), np.array([1.0, 0, 0, 0]))
+    node.fmap = fmap
+    steady_states(ros)
+    wait_for(lambda: ros.call('start').success, 10, 'start')
+    assert ros.call('stop').success
+    wait_for(lambda: finished(ros), 5, 'the stop')
+    assert ros.call('start').success and ros.status['failures'] == 1

@@ -188,6 +188,7 @@ class PlannerNode(Node):
         self.measured: np.ndarray | None = None
         self.measured_at = -np.inf
         self.run: Run | None = None
+        self._ended_run: Run | None = None
         self.plan_future: Future | None = None
         self.worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix='probdis_plan')
         self.io = ThreadPoolExecutor(max_workers=1, thread_name_prefix='probdis_io')
@@ -450,10 +451,25 @@ class PlannerNode(Node):
                 self._publish_status()
 
     def _ended(self) -> None:
-        """A run ended: log it once, close the bag a little later (last status, hold)."""
-        if self.recorder_close_at is None and self.recorder is not None:
-            self.get_logger().info(f'run ended: {self.run.outcome}: {self.run.message}')
+        """
+        A run ended: log it, close the bag a little later (the last status and the stop).
+
+        A finished run (succeeded, gave up) leaves its map beside its bag and the next run
+        starts from an empty one, as the paper's loop does; an interrupted one (~/stop, a
+        fault, a crash) keeps the map, and the next ~/start resumes with it.
+        """
+        if self._ended_run is self.run:
+            return
+        self._ended_run = self.run
+        self.get_logger().info(f'run ended: {self.run.outcome}: {self.run.message}')
+        if self.recorder is not None:
             self.recorder_close_at = self._now() + 0.5
+        if self.run.outcome in ('succeeded', 'gave_up'):
+            if self.bag_path:
+                self.io.submit(self._write_map, str(Path(self.bag_path) / 'failure_map.json'),
+                               self.fmap.to_dict())
+            self.fmap = FailureMap(self.arm.task_space, self.fmap.c_fail)
+            self._save_map()
 
     def _tick(self) -> None:
         now = self._now()
@@ -518,7 +534,8 @@ class PlannerNode(Node):
             status = {'state': 'idle', 'paths': 0, 'last_plan_time_s': 0.0,
                       'last_replan_latency_s': None, 'replan_latencies_s': [],
                       'outcome': '', 'message': 'ready'}
-        return {**status, 'failures': len(self.fmap), 'bag': self.bag_path}
+        failures = status.get('failures', 0) if self.run is not None else len(self.fmap)
+        return {**status, 'failures': failures, 'bag': self.bag_path}
 
     def _publish_status(self) -> None:
         self.status_pub.publish(String(data=json.dumps(self.status())))

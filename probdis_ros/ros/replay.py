@@ -154,6 +154,7 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
     settings = result.settings = given or replace(DetectorSettings(), **overrides)
     measured = None
     measured_velocity = None
+    early = None               # a command recorded before the first joint state
     detector = None
     kind = ''
     after_block = False
@@ -177,13 +178,13 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
             ended = state.get('state') in ('succeeded', 'gave_up', 'stopped')
             continue
         if message.topic == trajectory_topic:
-            if measured is None:
-                result.problems.append(f'{t:.3f} s: command before any joint state, skipped')
-                continue
             try:
                 command = command_from_msg(msg, names, arm.lower, arm.upper)
             except ValueError as err:
                 result.problems.append(f'{t:.3f} s: command refused: {err}')
+                continue
+            if measured is None:       # JTC starts it from the first state it reads
+                early = (t, command)
                 continue
             timed = JtcTrajectory(command, measured, measured_velocity, t)
             if ended or (len(timed.points) == 2 and
@@ -204,6 +205,14 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
             result.problems.append(f'{t:.3f} s: joint state refused: {err}')
             continue
         measured, measured_velocity = q, joint_velocities(msg, names)
+        if early is not None:
+            sent, command = early
+            early = None
+            detector, kind = BlockDetector(JtcTrajectory(command, q, measured_velocity, sent),
+                                           sent, settings), 'path'
+            result.paths += 1
+            result.problems.append(f'{sent:.3f} s: command before any joint state: started '
+                                   f'from the first one, at {t:.3f} s')
         result.times.append(t)
         result.configs.append(q)
         if detector is None:
