@@ -70,11 +70,16 @@ def data_file(*parts: str) -> Path:
     return path
 
 
-def scenario_path(name: str) -> Path:
-    """Return a scenario file: name as a path, or the name of one in config/scenarios/."""
+def config_file(name: str | Path, folder: str) -> Path:
+    """Return a user's file by its path, or the name of one shipped in config/<folder>/."""
     path = Path(name)
     if not path.exists() and path.suffix == '' and len(path.parts) == 1:
-        shipped = share_dir()[1] / 'config' / 'scenarios' / f'{name}.yaml'
+        shipped = share_dir()[1] / 'config' / folder / f'{name}.yaml'
         if shipped.exists():
             return shipped
     return path
+
+
+def scenario_path(name: str) -> Path:
+    """Return a scenario file: name as a path, or the name of one in config/scenarios/."""
+    return config_file(name, 'scenarios')

@@ -302,14 +302,9 @@ def scene_from_dict(doc: object, name: str = '', source: str = '') -> Scene:
 
 def scene_path(name: str | Path) -> Path:
     """Return a scene file: a path, or the name of one shipped in config/scenes/."""
-    path = Path(name)
-    if not path.exists() and path.suffix == '' and len(path.parts) == 1:
-        from probdis_ros.resources import share_dir
+    from probdis_ros.resources import config_file
 
-        shipped = share_dir()[1] / 'config' / 'scenes' / f'{name}.yaml'
-        if shipped.exists():
-            return shipped
-    return path
+    return config_file(name, 'scenes')
 
 
 def shipped_scenes() -> list[str]:
