@@ -624,7 +624,7 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument('--plot', metavar='OUT.png', help='draw the episode (2-D, or the physics '
                      'scene with the flange path and the failures)')
     sim.add_argument('--engine', choices=('kinematic', 'physics'), default='kinematic',
-                     help='the simulated arm: the kinematic one of the paper\'s settings, or '
+                     help="the simulated arm: the kinematic one of the paper's settings, or "
                      'MuJoCo in joint impedance through JTC (with --scene)')
     sim.add_argument('--scene', default='demo_hook', help='with --engine physics: a scene '
                      'file, or the name of one in config/scenes/')

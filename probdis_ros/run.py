@@ -219,7 +219,7 @@ class Run:
         self._send_pending()
 
     def plan_failed(self, error: BaseException) -> None:
-        """A planner error must not leave the arm moving."""
+        """Stop the run on a planner error: it must not leave the arm moving."""
         if self.plan_pending:
             self.plan_pending = False
             self.finish(State.STOPPED, f'planning failed: {error}')
@@ -240,7 +240,7 @@ class Run:
         self.finish(State.STOPPED, reason)
 
     def bad_joint_state(self, reason: str) -> None:
-        """A malformed joint state arrived: an active run stops."""
+        """Stop an active run: a malformed joint state arrived."""
         if self.phase.active:
             self.finish(State.STOPPED, f'malformed joint state: {reason}')
 
@@ -368,7 +368,7 @@ class Run:
         self._emit(StatusChanged())
 
     def _retreat_blocked(self, detector: BlockDetector, now: float) -> None:
-        """A retreat was blocked: learn it like any block; the next plan starts here."""
+        """Learn a blocked retreat like any block; the next plan starts where the arm is."""
         config, _, direction = self._onset(detector, now)
         if not np.any(direction):
             self.message = f'retreat blocked ({detector.reason}) at rest: nothing to learn'

@@ -123,7 +123,7 @@ def test_a_sweep_of_another_seed_is_refused_in_the_same_directory(tmp_path):
     with pytest.raises(ValueError, match='another sweep'):
         run_sweep(other, tmp_path, workers=1)
     # nor one whose planner settings differ (an ablation of K belongs in its own directory)
-    with pytest.raises(ValueError, match="planner defaults"):
+    with pytest.raises(ValueError, match='planner defaults'):
         run_sweep(keys, tmp_path, workers=1, rrt={'iterations': 400})
 
 

@@ -450,4 +450,3 @@ def from_state(q: np.ndarray, v: np.ndarray | None, path: np.ndarray,
                   velocities=np.vstack([brake.velocities, rest.velocities[1:]]),
                   accelerations=np.vstack([brake.accelerations, rest.accelerations[1:]]),
                   via_times=shift + rest.via_times, overload=brake.overload, period=period)
-

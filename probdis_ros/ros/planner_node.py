@@ -124,14 +124,14 @@ PARAMETERS = {
                                                  'much earlier', 0.0, 1.0)),
     'gap_ceiling': (DETECT.gap_ceiling, _float('L1 gap [rad] that is a block at once (force '
                                                '~ stiffness x gap); 0: off', 0.0, 10.0)),
-    'joint_gap_ceiling': (DETECT.joint_gap_ceiling, _float('one joint\'s gap [rad] that is a '
+    'joint_gap_ceiling': (DETECT.joint_gap_ceiling, _float("one joint's gap [rad] that is a "
                                                            'block at once; 0: off', 0.0, 10.0)),
     'onset_gap': (DETECT.onset_gap, _float('a block began where the gap last rose above this '
                                            '[rad]', 0.001, 1.0)),
     'echo_time': (DETECT.echo_time, _float('seconds of lag-free motion that reveal a driver '
                                            'echoing the command; 0: off', 0.0, 10.0)),
     'replan_tolerance': (RUN.replan_tolerance, _float('L1 distance [rad] between the arm and '
-                                                      'a plan\'s start above which it plans '
+                                                      "a plan's start above which it plans "
                                                       'again from the arm', 0.001, 1.0)),
     'goal_tolerance': (0.04, _float('joint-space distance to the goal that counts as reached',
                                     0.0, 1.0)),
@@ -452,7 +452,7 @@ class PlannerNode(Node):
 
     def _ended(self) -> None:
         """
-        A run ended: log it, close the bag a little later (the last status and the stop).
+        Log a run's end, close its bag a little later (the last status and the stop).
 
         A finished run (succeeded, gave up) leaves its map beside its bag and the next run
         starts from an empty one, as the paper's loop does; an interrupted one (~/stop, a
