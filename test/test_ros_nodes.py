@@ -262,8 +262,10 @@ def test_joint_state_noise_gives_no_false_blocks(ros, tmp_path):
 
 def test_the_planner_keeps_up_with_joint_states_at_1khz(ros, tmp_path):
     """The mock runs in its own process at 1 kHz; the planner must not fall behind."""
-    # the kinematic arm lags its command by the driver's filter alone (0.04 s)
-    node = planner(ros, tmp_path, state_timeout=2.0, motion_delay=0.04)
+    # the kinematic arm lags its command by the driver's filter alone (0.04 s); at full speed
+    # a block during the acceleration is traced back to the motion's start (a known limit of
+    # the onset, README), so this runs at 0.3
+    node = planner(ros, tmp_path, state_timeout=2.0, motion_delay=0.04, velocity_scaling=0.3)
     arm = mock_process(ros, 'rate:=1000.0')
     ages = []
     ros.probe.create_timer(0.02, lambda: node.measured is not None and ages.append(

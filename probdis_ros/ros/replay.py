@@ -47,6 +47,7 @@ from probdis_ros.ros.messages import (
 )
 
 JOINT_STATES = '/lbr/joint_states'
+FINISHED = ('succeeded', 'gave_up', 'stopped')
 TRAJECTORY = '/lbr/joint_trajectory_controller/joint_trajectory'
 JOINTS = [f'lbr_A{i}' for i in range(1, 8)]
 JOINT_STATE_TYPE = 'sensor_msgs/msg/JointState'
@@ -161,6 +162,7 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
     last_path_done = False
     ended = False              # the planner said the run is over: what follows is its stop
     status_paths: list[int] = []
+    previous = None            # the state of the last status message
     for message in source.messages(topics):
         t = message.stamp_ns * 1e-9 - t0
         msg = source.deserialize(message)
@@ -170,12 +172,14 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
                 known = {f.name for f in fields(DetectorSettings)}
                 recorded = {k: v for k, v in state['detection'].items() if k in known}
                 settings = result.settings = DetectorSettings(**{**recorded, **overrides})
-            if state.get('state') == 'planning' and state.get('paths') == 0:
+            starting = state.get('state') == 'planning' and state.get('paths') == 0
+            if starting and (previous is None or previous in FINISHED or previous == 'idle'):
                 result.runs += 1
                 status_paths.append(0)
+            previous = state.get('state')
             if status_paths:
                 status_paths[-1] = max(status_paths[-1], int(state.get('paths', 0)))
-            ended = state.get('state') in ('succeeded', 'gave_up', 'stopped')
+            ended = state.get('state') in FINISHED
             continue
         if message.topic == trajectory_topic:
             try:
