@@ -190,7 +190,8 @@ def test_a_full_run_against_the_physics_mock_learns_and_persists_failures(ros, t
     beside = Path(status['bag']) / 'failure_map.json'
     wait_for(lambda: beside.exists(), 5, 'the map beside the bag')
     assert len(FailureMap.load(beside)) == status['failures']
-    assert len(FailureMap.load(tmp_path / 'map.json')) == 0
+    wait_for(lambda: len(FailureMap.load(tmp_path / 'map.json')) == 0, 5,
+             'the emptied map file (written by the I/O thread)')
     for _, msg in ros.trajectories:
         times = [p.time_from_start.sec + p.time_from_start.nanosec * 1e-9 for p in msg.points]
         assert all(b > a for a, b in itertools.pairwise(times))
@@ -299,7 +300,8 @@ def test_reset_map_clears_the_file_and_is_refused_during_a_run(ros, tmp_path):
     wait_for(lambda: ros.status.get('failures') == 1, 10, 'the map to load')
     response = ros.call('reset_map')
     assert response.success and 'cleared 1' in response.message
-    assert len(FailureMap.load(tmp_path / 'map.json')) == 0
+    wait_for(lambda: len(FailureMap.load(tmp_path / 'map.json')) == 0, 5,
+             'the emptied map file (written by the I/O thread)')
     steady_states(ros)
     wait_for(lambda: ros.call('start').success, 10, 'start')
     assert not ros.call('reset_map').success
