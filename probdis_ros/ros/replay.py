@@ -177,8 +177,8 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
                 result.runs += 1
                 status_paths.append(0)
             previous = state.get('state')
-            if status_paths:
-                status_paths[-1] = max(status_paths[-1], int(state.get('paths', 0)))
+            if status_paths:           # the last word of a run (a withdrawn plan lowers it)
+                status_paths[-1] = int(state.get('paths', 0))
             ended = state.get('state') in FINISHED
             continue
         if message.topic == trajectory_topic:
