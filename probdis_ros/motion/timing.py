@@ -91,17 +91,3 @@ def hold_command(config: np.ndarray, after: float = 0.01) -> TrajectoryCommand:
     """Return a command that holds config, reached after seconds, at rest."""
     config = np.asarray(config, dtype=float)
     return TrajectoryCommand(np.array([after]), config[None], np.zeros((1, len(config))))
-
-
-def nearest_segment(points: np.ndarray, config: np.ndarray) -> int:
-    """Return the index of the path segment nearest to config (joint space)."""
-    best, best_d = 0, np.inf
-    for k in range(len(points) - 1):
-        a, b = points[k], points[k + 1]
-        d = b - a
-        denom = float(d @ d)
-        frac = 0.0 if denom == 0 else float(np.clip((config - a) @ d / denom, 0.0, 1.0))
-        dist = float(np.linalg.norm(a + frac * d - config))
-        if dist < best_d:
-            best, best_d = k, dist
-    return best
