@@ -168,6 +168,30 @@ def cmd_experiment_report(args: argparse.Namespace) -> int:
     return 0
 
 
+def _detection_overrides(items: list[str]) -> dict[str, float]:
+    """Parse ``NAME=VALUE`` detector thresholds, refusing unknown names and bad values."""
+    from dataclasses import fields
+
+    from probdis_ros.motion.detector import DetectorSettings
+
+    known = {f.name for f in fields(DetectorSettings) if f.type in ('float', float)}
+    out = {}
+    for item in items or []:
+        name, _, value = item.partition('=')
+        if name not in known:
+            raise UsageError(f'--detection {item!r}: not a detector threshold (one of '
+                             f'{", ".join(sorted(known))})')
+        try:
+            out[name] = float(value)
+        except ValueError:
+            raise UsageError(f'--detection {item!r}: {value!r} is not a number') from None
+    try:
+        DetectorSettings(**out)
+    except ValueError as err:
+        raise UsageError(f'--detection: {err}') from None
+    return out
+
+
 def cmd_experiment_robot(args: argparse.Namespace) -> int:
     """Run the robot scenarios through the ROS nodes against the mock iiwa (Table I)."""
     from probdis_ros.physics.scene import scene_path
@@ -186,11 +210,15 @@ def cmd_experiment_robot(args: argparse.Namespace) -> int:
     methods = [Method.parse(m) for m in _split(args.methods)]
     if args.runs < 1 or not 0 < args.velocity_scaling <= 1:
         raise UsageError('--runs must be positive and --velocity-scaling in (0, 1]')
+    if args.offline and not physics:
+        raise UsageError('--offline runs the physics scenes (--engine physics)')
+    detection = _detection_overrides(args.detection)
     say = None if args.json else (lambda line: print(line, file=sys.stderr, flush=True))
     records = run_robot_experiment(Path(args.out), scenarios, methods, args.runs,
                                    args.velocity_scaling, args.timeout, say,
                                    engine=args.engine, sim_time=args.sim_time,
-                                   real_time_factor=args.real_time_factor)
+                                   real_time_factor=args.real_time_factor,
+                                   offline=args.offline, detection=detection)
     wanted = {(s, str(m)) for s in scenarios for m in methods}
     records = [r for r in records if (r['scenario'], r['method']) in wanted]
     if args.json:
@@ -737,7 +765,7 @@ def build_parser() -> argparse.ArgumentParser:
                        help='the mock arm: MuJoCo in joint impedance, or the idealised one')
     robot.add_argument('--sim-time', action=argparse.BooleanOptionalAction, default=True,
                        help='run the mock on simulated time (/clock), faster than real time')
-    robot.add_argument('--real-time-factor', type=float, default=5.0,
+    robot.add_argument('--real-time-factor', type=float, default=1.0,
                        help='with --sim-time: speed over the wall clock (at most); 0: as fast '
                        'as the mock can (commands may then be taken late)')
     robot.add_argument('--methods', default='epsilon:0.2,hard:0.01,probabilistic',
@@ -747,6 +775,12 @@ def build_parser() -> argparse.ArgumentParser:
     robot.add_argument('--velocity-scaling', type=float, default=0.2,
                        help='of the planner (0.2, its default on the real arm)')
     robot.add_argument('--timeout', type=float, default=600.0, help='seconds per run')
+    robot.add_argument('--offline', action='store_true',
+                       help="run the physics scenes without the nodes (the planner node's "
+                       'run against JTC and MuJoCo): deterministic and blind to the load')
+    robot.add_argument('--detection', action='append', metavar='NAME=VALUE',
+                       help='a detector threshold for every run, e.g. gap_ceiling=0 '
+                       '(repeatable; README "Parameters")')
     robot.add_argument('--json', action='store_true', help='print every run as JSON')
     robot.set_defaults(handler=cmd_experiment_robot)
     return parser

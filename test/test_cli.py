@@ -147,3 +147,27 @@ def test_plan_prints_a_path_on_a_saved_map(probdis, tmp_path):
     assert result.returncode == 2 and '--start needs 7 joint values' in result.stderr
     result = probdis(*args[:-1], '--plan-time', '0.1', check=False)
     assert result.returncode == 2 and 'not allowed with' in result.stderr
+
+
+def test_the_robot_experiment_offline_is_deterministic_and_takes_detector_overrides(
+        probdis, tmp_path):
+    args = ('experiment', 'robot', '--offline', '--runs', '2', '--scenarios', 'demo_hook',
+            '--methods', 'probabilistic', '--detection', 'gap_ceiling=0.6', '--json')
+    runs = [json.loads(probdis(*args, '--out', str(tmp_path / name), timeout=300).stdout)
+            for name in ('a', 'b')]
+    for records in runs:
+        assert [r['run'] for r in records] == [0, 1]
+        assert all(r['offline'] and r['detection'] == {'gap_ceiling': 0.6} and
+                   r['bag'] is None for r in records)
+        assert max(r['peak_contact_force_n'] for r in records) > 0     # seed 1 touches
+    keys = ('success', 'paths', 'failures', 'peak_contact_force_n', 'sim_time_s')
+    assert [[r[k] for k in keys] for r in runs[0]] == [[r[k] for k in keys] for r in runs[1]]
+    bad = probdis('experiment', 'robot', '--offline', '--detection', 'ceiling=1',
+                  '--out', str(tmp_path / 'c'), check=False)
+    assert bad.returncode == 2 and "'ceiling=1': not a detector threshold" in bad.stderr
+    bad = probdis('experiment', 'robot', '--offline', '--engine', 'kinematic',
+                  '--scenarios', 'demo_iiwa', '--out', str(tmp_path / 'c'), check=False)
+    assert bad.returncode == 2 and '--offline runs the physics scenes' in bad.stderr
+    bad = probdis('experiment', 'robot', '--detection', 'gap_ceiling=0.05',
+                  '--out', str(tmp_path / 'c'), check=False)
+    assert bad.returncode == 2 and 'must exceed d_dist' in bad.stderr

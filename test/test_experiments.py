@@ -41,7 +41,7 @@ from probdis_ros.experiments.sweep import (
     read_episodes,
     run_sweep,
 )
-from probdis_ros.ros.robot_experiment import robot_table
+from probdis_ros.ros.robot_experiment import robot_table, state_gaps, valid
 import pytest
 
 SWEEP = ['--setting', '2d', '--obstacles', '1,10', '--worlds', '5',
@@ -207,6 +207,50 @@ def test_the_robot_table_counts_successes_and_averages_paths_of_successful_runs(
         '| scenario | m | n |', '| --- | --- | --- |',
         '| a | 1 / 2 | 0 / 1 |', '| b | 1 / 1 | 0 / 0 |', '| **total** | 2 / 3 | 0 / 1 |',
         '| mean paths (successful runs) | 4.5 | - |']
+
+
+def test_runs_where_the_planner_fell_behind_are_left_out_of_the_robot_table():
+    records = [{'scenario': 'a', 'method': 'm', 'run': 0, 'success': True, 'paths': 3,
+                'max_state_gap_s': 0.01},
+               {'scenario': 'a', 'method': 'm', 'run': 1, 'success': True, 'paths': 5,
+                'max_state_gap_s': 2.07}]
+    table = robot_table(records, ['a'], ['m'])
+    assert '| a | 1 / 1 |' in table and '| mean paths (successful runs) | 3.0 |' in table
+    assert '1 run(s) left out: the planner fell behind' in table
+    # run again validly, the run counts once and nothing is left out
+    rerun = {'scenario': 'a', 'method': 'm', 'run': 1, 'success': False, 'paths': 20,
+             'max_state_gap_s': 0.01}
+    table = robot_table([*records, rerun], ['a'], ['m'])
+    assert '| a | 1 / 2 |' in table and 'left out' not in table
+
+
+def test_the_robot_table_gives_the_median_peak_force_where_the_physics_knows_it():
+    records = [{'scenario': 'a', 'method': 'm', 'success': False, 'paths': 20,
+                'peak_contact_force_n': force} for force in (100.0, 300.0, 250.0)]
+    assert robot_table(records, ['a'], ['m']).splitlines()[-1] == \
+        '| peak contact force per run, median [N] | 250 |'
+
+
+def test_the_joint_states_a_planner_missed_are_counted_from_its_bag(tmp_path):
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import get_typestore, Stores
+
+    store = get_typestore(Stores.ROS2_JAZZY)
+    kind = 'sensor_msgs/msg/JointState'
+    message = store.types[kind]
+    stamps = [k * 0.01 for k in range(50)] + [0.49 + 0.5 + k * 0.01 for k in range(20)]
+    with Writer(tmp_path / 'bag', version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        conn = writer.add_connection('/lbr/joint_states', kind, typestore=store)
+        for t in stamps:
+            header = store.types['std_msgs/msg/Header'](
+                stamp=store.types['builtin_interfaces/msg/Time'](sec=0, nanosec=0),
+                frame_id='')
+            msg = message(header=header, name=[], position=np.zeros(0), velocity=np.zeros(0),
+                          effort=np.zeros(0))
+            writer.write(conn, round((1000.0 + t) * 1e9), store.serialize_cdr(msg, kind))
+    missed, longest = state_gaps(tmp_path / 'bag')
+    assert missed == 49 and longest == pytest.approx(0.5, abs=1e-6)
+    assert not valid({'max_state_gap_s': longest}) and valid({'max_state_gap_s': 0.01})
 
 
 def test_the_claims_compare_with_the_best_baseline_and_find_ranking_flips():

@@ -26,6 +26,9 @@ joint impedance follows its command with a lag) with where it is.  The L1 gap
   total or ``joint_gap_ceiling`` at one joint: with joint stiffness K the arm then presses
   with about K x gap, and a compliant arm whose unblocked joints keep moving may never stall
   before the trajectory ends (DESIGN.md "Facts: a physics-simulated iiwa");
+* **blocked** at once, where the joint states carry the measured torques and a gravity
+  model is given, when the external-torque estimate ``effort - g(q)`` exceeds
+  ``torque_ceiling`` at a joint (0: off; it needs the load data right, as KUKA's does);
 * **done** when the trajectory has ended and the gap to its last point is at most ``d_dist``;
 * **echo** when the measured positions have followed the moving command with no lag at all
   for ``echo_time`` seconds: no arm in joint impedance does that, a driver that reports the
@@ -41,8 +44,10 @@ unblocked joints follow the command).  No rclpy: plain seconds and arrays.
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
 from enum import Enum
+from functools import lru_cache
 
 import numpy as np
 
@@ -76,6 +81,9 @@ class DetectorSettings:
     onset_rate: float = 0.1         # L1 gap growth [rad/s] over 0.1 s that is still a rise
     echo_time: float = 0.5          # seconds of lag-free motion that reveal an echo; 0: off
     echo_speed: float = 0.05        # commanded L1 speed [rad/s] that counts as moving
+    torque_ceiling: float = 0.0     # external torque [Nm] at a joint that is a block; 0: off
+    load_mass: float = 0.0          # the grasped load for that estimate [kg] ...
+    load_com: tuple[float, float, float] = (0.0, 0.0, 0.0)  # ... at this point [m], flange frame
 
     def __post_init__(self) -> None:
         """Refuse thresholds that cannot work, naming them."""
@@ -84,11 +92,23 @@ class DetectorSettings:
             if not getattr(self, name) > 0:
                 raise ValueError(f'{name} must be positive, got {getattr(self, name)}')
         for name in ('motion_delay', 'gap_ceiling', 'joint_gap_ceiling', 'echo_time',
-                     'speed_allowance'):
+                     'speed_allowance', 'torque_ceiling', 'load_mass'):
             if not getattr(self, name) >= 0:
                 raise ValueError(f'{name} must be >= 0, got {getattr(self, name)}')
+        if len(self.load_com) != 3:
+            raise ValueError(f'load_com must be 3 coordinates [m], got {list(self.load_com)}')
+        self.load_com = tuple(float(c) for c in self.load_com)
         if 0 < self.gap_ceiling <= self.d_dist:
             raise ValueError(f'gap_ceiling {self.gap_ceiling} must exceed d_dist {self.d_dist}')
+
+
+@lru_cache(maxsize=8)
+def gravity_model(load_mass: float, load_com: tuple[float, float, float]
+                  ) -> Callable[[np.ndarray], np.ndarray]:
+    """Return the iiwa's g(q) with a load (one per load: pinocchio reads the URDF once)."""
+    from probdis_ros.motion.gravity import GravityModel
+
+    return GravityModel(load_mass=load_mass, load_com=load_com)
 
 
 @dataclass(frozen=True)
@@ -108,17 +128,21 @@ class BlockDetector:
     ``start_time`` (a :class:`~probdis_ros.motion.jtc.JtcTrajectory`).
     """
 
-    def __init__(self, path, start_time: float, settings: DetectorSettings | None = None
-                 ) -> None:
+    def __init__(self, path, start_time: float, settings: DetectorSettings | None = None,
+                 gravity: Callable[[np.ndarray], np.ndarray] | None = None) -> None:
         self.path = path
-        self.start_time = start_time
         self.settings = settings or DetectorSettings()
+        if gravity is None and self.settings.torque_ceiling:
+            gravity = gravity_model(self.settings.load_mass, self.settings.load_com)
+        self.gravity = gravity          # g(q) for the external-torque estimate
+        self.start_time = start_time
         self._history: deque[tuple[float, np.ndarray]] = deque()
         self._rising: tuple[float, np.ndarray, np.ndarray] | None = None
         self._recent: deque[tuple[float, float, np.ndarray, np.ndarray]] = deque()
         self._echo_since: float | None = None
         self.gap = 0.0
         self.joint_gaps = np.zeros(0)
+        self.external_torque: np.ndarray | None = None
         self.onset: Onset | None = None
         self.reason = ''
 
@@ -127,8 +151,9 @@ class BlockDetector:
         q, v, _ = self.path.sample(t - self.settings.motion_delay)
         return q, v
 
-    def update(self, now: float, measured: np.ndarray) -> Verdict:
-        """Return the verdict after a new measurement at time now [s]."""
+    def update(self, now: float, measured: np.ndarray, effort: np.ndarray | None = None
+               ) -> Verdict:
+        """Return the verdict after a new measurement (and measured torques) at now [s]."""
         s = self.settings
         t = now - self.start_time
         measured = np.asarray(measured, dtype=float)
@@ -145,6 +170,15 @@ class BlockDetector:
             self.reason = (f'the measured positions followed the command with no lag for '
                            f'{s.echo_time:.1f} s')
             return Verdict.ECHO
+        if s.torque_ceiling and self.gravity is not None and effort is not None and \
+                len(effort) == len(measured):
+            self.external_torque = np.asarray(effort, dtype=float) - self.gravity(measured)
+            over = np.abs(self.external_torque) - s.torque_ceiling
+            if over.max() > 0:
+                joint = int(over.argmax())
+                return self._blocked(f'joint A{joint + 1} external torque '
+                                     f'{abs(self.external_torque[joint]):.1f} Nm above '
+                                     f'{s.torque_ceiling:.1f} Nm')
         if ended and self.gap <= s.d_dist:
             return Verdict.DONE
         if self.gap <= s.d_dist:

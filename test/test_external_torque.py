@@ -1,0 +1,79 @@
+# Copyright 2026 probdis_ros contributors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+
+"""The external-torque estimate (efforts minus the gravity model) and its ceiling."""
+
+import numpy as np
+from probdis_ros.motion.detector import BlockDetector, DetectorSettings, Verdict
+from probdis_ros.motion.gravity import GravityModel
+from probdis_ros.motion.jtc import JtcTrajectory, TrajectoryCommand
+from probdis_ros.physics import PhysicsIiwa
+import pytest
+from test_physics import BAR, bar_scene, blocked_run, REST_CONFIGS
+
+HELD = np.array([0.0, 0.7, 0.0, -1.3, 0.0, 0.9, 0.0])
+
+
+def hold(q):
+    """Return JTC holding q (a one-point trajectory from q at rest)."""
+    return JtcTrajectory(TrajectoryCommand(np.array([0.5]), q[None]), q, np.zeros(7))
+
+
+def test_the_gravity_model_is_the_torque_that_holds_the_physics_arm_and_its_load():
+    load = GravityModel(load_mass=1.0, load_com=BAR['position'])
+    bare = GravityModel()
+    arm = PhysicsIiwa(bar_scene(mass=1.0, box=False))
+    for q in REST_CONFIGS:
+        arm.reset(q)
+        arm.advance(q, 0.05)
+        np.testing.assert_allclose(load(q), arm.tau_measured, atol=1e-6)
+    # without the load data, the object's weight reads as an external torque
+    assert abs(bare(HELD)[1] - load(HELD)[1]) > 5
+
+
+def test_pressing_into_an_obstacle_is_seen_as_the_contact_torque():
+    arm, *_ = blocked_run(seconds=0.5)
+    estimate = arm.tau_measured - GravityModel(load_mass=0.5, load_com=BAR['position'])(arm.q)
+    # at rest the drives hold the contact: the estimate is the contact torque, with a sign
+    np.testing.assert_allclose(estimate, -arm.tau_external, atol=0.5)
+    assert abs(estimate[1]) > 5
+
+
+@pytest.mark.parametrize('ceiling, extra, verdict', [
+    (20.0, 25.0, Verdict.BLOCKED), (20.0, 15.0, Verdict.MOVING), (0.0, 25.0, Verdict.MOVING)])
+def test_the_torque_ceiling_declares_a_block_at_once_whatever_the_gap(ceiling, extra, verdict):
+    gravity = GravityModel()
+    settings = DetectorSettings(torque_ceiling=ceiling)
+    detector = BlockDetector(hold(HELD), 0.0, settings, gravity=gravity)
+    effort = gravity(HELD) + np.array([0, extra, 0, 0, 0, 0, 0])
+    assert detector.update(0.1, HELD, effort) is verdict      # the gap is zero
+    if verdict is Verdict.BLOCKED:
+        assert detector.reason == f'joint A2 external torque {extra:.1f} Nm above 20.0 Nm'
+
+
+def test_the_torque_ceiling_needs_the_load_data_and_waits_without_efforts():
+    loaded = GravityModel(load_mass=1.0, load_com=BAR['position'])(HELD)    # what drives hold
+    right = DetectorSettings(torque_ceiling=5.0, load_mass=1.0, load_com=BAR['position'])
+    wrong = DetectorSettings(torque_ceiling=5.0)                # the 1 kg object left out
+    assert BlockDetector(hold(HELD), 0.0, right).update(0.1, HELD, loaded) is Verdict.MOVING
+    assert BlockDetector(hold(HELD), 0.0, wrong).update(0.1, HELD, loaded) is Verdict.BLOCKED
+    # joint states without efforts: only the gaps decide
+    assert BlockDetector(hold(HELD), 0.0, wrong).update(0.1, HELD, None) is Verdict.MOVING
+    assert BlockDetector(hold(HELD), 0.0, wrong).update(0.1, HELD, np.zeros(0)) is \
+        Verdict.MOVING
+    with pytest.raises(ValueError, match='torque_ceiling'):
+        DetectorSettings(torque_ceiling=-1.0)
+    with pytest.raises(ValueError, match='load_com'):
+        DetectorSettings(load_com=(0.0, 0.1))
