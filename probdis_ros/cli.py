@@ -259,7 +259,16 @@ def cmd_sim(args: argparse.Namespace) -> int:
     from probdis_ros.sim.worlds import load_world, random_world
 
     method = Method.resolve(args.method, args.threshold, args.epsilon)
-    if args.scenario:
+    if args.family and (args.scenario or args.setting):
+        raise UsageError('--family draws its own world (3d-orient): no --scenario or --setting')
+    if args.family:
+        from probdis_ros.sim.families import FAMILIES, random_family_world
+
+        if args.family not in FAMILIES:
+            raise UsageError(f'unknown family {args.family!r}; choose from '
+                             f'{", ".join(FAMILIES)}')
+        world = random_family_world(args.family, args.seed or 0)
+    elif args.scenario:
         world = load_world(scenario_path(args.scenario))
         if args.setting and args.setting != world.setting:
             raise UsageError(f'--setting {args.setting} does not match the scenario '
@@ -281,7 +290,8 @@ def cmd_sim(args: argparse.Namespace) -> int:
     outcome = 'disentangled' if result.success else 'NOT disentangled'
     times = result.plan_times_s
     empty = f' ({result.empty_plans} of them empty plans)' if result.empty_plans else ''
-    print(f'{world.name or args.scenario}: {method}: {outcome} after {result.paths} '
+    name = world.name or args.scenario or f'{args.family} world {args.seed or 0}'
+    print(f'{name}: {method}: {outcome} after {result.paths} '
           f'path(s){empty}, {result.failures} failure(s) learned')
     if times:
         print(f'planning time per path: median {statistics.median(times):.3f} s, '
@@ -301,8 +311,9 @@ def _sim_physics(args: argparse.Namespace) -> int:
     from probdis_ros.physics.picture import plot_scene_run
     from probdis_ros.planning import Method
 
-    if args.scenario or args.setting:
-        raise UsageError('--engine physics runs a --scene, not a --scenario or --setting')
+    if args.scenario or args.setting or args.family:
+        raise UsageError('--engine physics runs a --scene, not a --scenario, --setting or '
+                         '--family (the families are kinematic worlds)')
     method = Method.resolve(args.method, args.threshold, args.epsilon)
     episode = run_physics_episode(args.scene, method, seed=args.seed or 0,
                                   max_paths=args.max_paths)
@@ -645,6 +656,9 @@ def build_parser() -> argparse.ArgumentParser:
                      '(default 0)')
     sim.add_argument('--scenario', help='a scenario YAML file, or the name of one in '
                      'config/scenarios/')
+    sim.add_argument('--family', help='an entanglement family (open_box, closed_box, '
+                     'plate_hole, hook_bar, clutter): the world of --seed, as the family '
+                     'sweeps draw it (README "Entanglement families")')
     sim.add_argument('--max-paths', type=_positive_int, default=20, help='N_ITER')
     sim.add_argument('--c-fail', type=float, default=DEFAULT_C_FAIL,
                      help='C_FAIL of the failure map [1/m^2] (probabilistic:C overrides it)')

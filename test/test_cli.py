@@ -171,3 +171,14 @@ def test_the_robot_experiment_offline_is_deterministic_and_takes_detector_overri
     bad = probdis('experiment', 'robot', '--detection', 'gap_ceiling=0.05',
                   '--out', str(tmp_path / 'c'), check=False)
     assert bad.returncode == 2 and 'must exceed d_dist' in bad.stderr
+
+
+def test_sim_draws_a_family_world_from_the_seed(probdis):
+    runs = [json.loads(probdis('sim', '--family', 'hook_bar', '--seed', '2', '--max-paths', '3',
+                               '--json').stdout) for _ in range(2)]
+    assert runs[0] == {**runs[1], 'plan_times_s': runs[0]['plan_times_s']}
+    assert 1 <= runs[0]['paths'] <= 3
+    bad = probdis('sim', '--family', 'nope', check=False)
+    assert bad.returncode == 2 and "unknown family 'nope'" in bad.stderr
+    bad = probdis('sim', '--family', 'open_box', '--setting', '2d', check=False)
+    assert bad.returncode == 2 and '--family draws its own world' in bad.stderr
