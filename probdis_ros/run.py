@@ -38,6 +38,13 @@ the obstacle there and swung on while its unblocked joints followed the command)
 retreat starts from where the arm is and goes back the way it came; a blocked retreat is a
 block too, and the next path is planned from where the arm is when the plan it was to run
 began elsewhere.  A driver that echoes the command instead of measuring stops the run.
+
+What it refuses: a configuration that is not finite or lies outside the joint limits by more
+than ``LIMIT_TOLERANCE`` is never taken (the host's :mod:`probdis_ros.motion.state_check`
+refuses it first; a run that gets one anyway stops as for any refused joint state), and a
+start within ``goal_tolerance`` of the goal ends at once, succeeded, without a motion.  A run
+that ends while a path is being planned cancels the planning (:class:`CancellablePlanner`:
+before the next planner call; the host drops the result of the one under way).
 """
 
 from __future__ import annotations
@@ -45,6 +52,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import Enum
+import threading
 
 import numpy as np
 from probdis_ros.model.arms import Arm
@@ -58,6 +66,7 @@ from probdis_ros.motion.profiles import (
     MotionLimits,
     stop,
 )
+from probdis_ros.motion.state_check import LIMIT_TOLERANCE
 from probdis_ros.planning.disentangle import Disentangler, State
 
 #: What a run says when the joint states echo the command (README "Pointing it at the real arm").
@@ -65,6 +74,14 @@ ECHO_MESSAGE = ('joint states follow the command with no lag: the driver reports
                 'commanded position, not the measured one, so no block could be seen. In the '
                 'lbr stack set open_loop: false for JOINT_IMPEDANCE_CONTROL (releases from '
                 'December 2024 do it themselves)')
+
+
+#: A stop from the measured state of an arm off its command carries it on at its measured
+#: velocity for at most this long [s].
+EXTRAPOLATE = 0.05
+#: An arm whose L1 velocity differs from its command's by more than this [rad/s] does not
+#: follow it (with its position within d_dist).
+FOLLOWING_SPEED = 0.5
 
 
 class Phase(str, Enum):
@@ -141,6 +158,46 @@ class StatusChanged:
     """The status changed; publish it."""
 
 
+class PlanCancelledError(Exception):
+    """The run that asked for this plan has ended."""
+
+
+class CancellablePlanner:
+    """A planner that refuses to start another plan once cancelled (wraps ``loop.planner``)."""
+
+    def __init__(self, planner) -> None:
+        self.planner = planner
+        self.cancelled = threading.Event()
+
+    def cancel(self) -> None:
+        """Make the next plan call raise PlanCancelledError (the one running finishes)."""
+        self.cancelled.set()
+
+    def plan(self, start, goal, fmap, rng):
+        """Plan as the wrapped planner does, unless cancelled."""
+        if self.cancelled.is_set():
+            raise PlanCancelledError('the run ended')
+        return self.planner.plan(start, goal, fmap, rng)
+
+
+def usable(arm: Arm, config: np.ndarray) -> str:
+    """Return why a measured configuration cannot be taken ('' if it can)."""
+    config = np.asarray(config, dtype=float)
+    if config.shape != (arm.n_joints,) or not np.all(np.isfinite(config)):
+        return f'not {arm.n_joints} finite positions: {config.tolist()}'
+    if not arm.within_limits(config, LIMIT_TOLERANCE)[0]:
+        return f'outside the joint limits: {np.round(config, 4).tolist()}'
+    return ''
+
+
+def rest_command(arm: Arm, limits: MotionLimits, q: np.ndarray,
+                 v: np.ndarray | None = None) -> TrajectoryCommand:
+    """Return the command that decelerates the arm to rest from (q, v), inside the limits."""
+    q = np.clip(np.asarray(q, dtype=float), arm.lower, arm.upper)
+    v = np.zeros_like(q) if v is None else np.asarray(v, dtype=float)
+    return stop(q, v, np.zeros_like(q), limits).command
+
+
 @dataclass
 class Run:
     """A disentangling run: feed it events, carry out its actions."""
@@ -161,6 +218,7 @@ class Run:
         self.measured_at = -np.inf
         self.detector: BlockDetector | None = None
         self.trajectory: JtcTrajectory | None = None     # the last command, as JTC runs it
+        self.following = False                           # the last state was on it
         self.motion: Motion | None = None                # the path or retreat being run
         self.plan_pending = False
         self.pending_path: np.ndarray | None = None
@@ -171,26 +229,54 @@ class Run:
         self.outcome = ''
         self.message = 'ready'
         self._now = -np.inf
+        if self.loop is not None and not isinstance(self.loop.planner, CancellablePlanner):
+            self.loop.planner = CancellablePlanner(self.loop.planner)
 
     # -- events ------------------------------------------------------------------------
 
-    def start(self, now: float, config: np.ndarray) -> None:
-        """Start from config, the newest measured configuration."""
+    def start(self, now: float, config: np.ndarray, velocity: np.ndarray | None = None
+              ) -> None:
+        """Start from config (and velocity), the newest measured state (at the goal: done)."""
         self._now = now
-        self.measured = np.asarray(config, dtype=float).copy()
-        self.measured_at = now
         self.outcome, self.message = '', 'running'
+        problem = usable(self.arm, config)
+        if problem:
+            self.phase = Phase.PLANNING     # so that finish ends it like any refused state
+            self.bad_joint_state(problem)
+            return
+        self.measured = np.clip(np.asarray(config, dtype=float), self.arm.lower, self.arm.upper)
+        self.measured_at, self.measured_velocity = now, velocity
+        if np.linalg.norm(self.measured - self.loop.goal) <= self.loop.goal_tolerance:
+            self.finish(State.SUCCEEDED, 'already at the goal: nothing to do')
+            return
         self._plan_from(self.measured)
 
     def on_joint_state(self, now: float, config: np.ndarray,
-                       velocity: np.ndarray | None = None) -> None:
-        """Take a measured configuration at time now."""
+                       velocity: np.ndarray | None = None,
+                       effort: np.ndarray | None = None) -> None:
+        """
+        Take a measured state at time now (a configuration that cannot be the arm's stops).
+
+        ``effort``, the measured joint torques where the driver sends them, feeds the
+        detector's external-torque ceiling.
+        """
         self._now = now
-        self.measured, self.measured_at = np.asarray(config, dtype=float), now
+        problem = usable(self.arm, config)
+        if problem:
+            self.bad_joint_state(problem)
+            return
+        self.measured = np.clip(np.asarray(config, dtype=float), self.arm.lower, self.arm.upper)
+        self.measured_at = now
         self.measured_velocity = velocity
+        if self.trajectory is not None:     # on its command: where and how fast it says
+            t = now - self.trajectory.taken_at - self.settings.detection.motion_delay
+            q, v, _ = self.trajectory.sample(t)
+            self.following = bool(np.abs(q - self.measured).sum() <= self.settings.detection.d_dist
+                                  and (velocity is None or
+                                       np.abs(v - velocity).sum() <= FOLLOWING_SPEED))
         if self.detector is None or not self.phase.active:
             return
-        verdict = self.detector.update(now, self.measured)
+        verdict = self.detector.update(now, self.measured, effort)
         if verdict is Verdict.MOVING:
             return
         detector, self.detector = self.detector, None
@@ -240,9 +326,9 @@ class Run:
         self.finish(State.STOPPED, reason)
 
     def bad_joint_state(self, reason: str) -> None:
-        """Stop an active run: a malformed joint state arrived."""
+        """Stop an active run: a joint state was refused (it is not used for anything)."""
         if self.phase.active:
-            self.finish(State.STOPPED, f'malformed joint state: {reason}')
+            self.finish(State.STOPPED, f'joint state refused: {reason}')
 
     # -- what happens ------------------------------------------------------------------
 
@@ -301,6 +387,7 @@ class Run:
         self._emit(Send(command, path, now))
         self.motion = motion
         self.trajectory = JtcTrajectory(command, self.measured, self.measured_velocity, now)
+        self.following = True
         self.detector = BlockDetector(self.trajectory, now, self.settings.detection)
 
     def _completed(self, config: np.ndarray) -> None:
@@ -386,6 +473,8 @@ class Run:
         """End the run: a plan still pending is dropped, the arm comes to rest unless at goal."""
         if state is State.STOPPED:
             self.loop.stop()
+        if self.plan_pending and isinstance(self.loop.planner, CancellablePlanner):
+            self.loop.planner.cancel()
         self.outcome = state.value
         self.plan_pending = False
         self.pending_path = None
@@ -400,24 +489,43 @@ class Run:
         """
         Decelerate to rest from the arm's state now, within the limits.
 
-        JTC starts any new command from the measured state, so the stop starts there while
-        the joint states are fresh (younger than state_timeout); when they are not, from where
-        the running command has taken the arm by now (the command motion_delay ago), never
-        from a stale position.
+        JTC starts any new command from the measured state, so the stop starts there, carried
+        on to now (a stop built from a state even one period old would first pull a moving
+        arm back): at its measured velocity over up to one and a half periods; beyond, by what
+        the running command did since, while the arm followed it (that also carries its
+        acceleration, which the joint states do not), else at its measured velocity for at
+        most ``EXTRAPOLATE`` s (a blocked arm barely moves).  When the joint
+        states have stopped arriving (older than state_timeout), from where the running
+        command has taken the arm by now (the command motion_delay ago): never from a stale
+        position.
         """
         now = self._time()
-        fresh = now - self.measured_at <= self.settings.state_timeout
+        age = max(now - self.measured_at, 0.0)
+        fresh = age <= self.settings.state_timeout
+        delay = self.settings.detection.motion_delay
         if self.trajectory is not None and not fresh:
-            t = now - self.trajectory.taken_at - self.settings.detection.motion_delay
-            q, v, a = self.trajectory.sample(t)
+            q, v, a = self.trajectory.sample(now - self.trajectory.taken_at - delay)
         elif self.measured is not None:
-            q = self.measured
-            v = self.measured_velocity if self.measured_velocity is not None else 0 * q
-            a = 0 * q
+            v = self.measured_velocity
+            if v is None or not np.all(np.isfinite(v)):
+                v = 0 * self.measured
+            a = 0 * self.measured
+            if self.trajectory is not None and self.following and age > 1.5 * self.period:
+                then = self.trajectory.sample(self.measured_at - self.trajectory.taken_at - delay)
+                later = self.trajectory.sample(now - self.trajectory.taken_at - delay)
+                q = self.measured + (later[0] - then[0])
+                v = v + (later[1] - then[1])
+            else:
+                q = self.measured + v * min(age, EXTRAPOLATE)
         else:
             return
         q = np.clip(q, self.arm.lower, self.arm.upper)
-        self._emit(Send(stop(q, v, a, self.limits).command, None, now))
+        v = v if v is not None and np.all(np.isfinite(v)) else 0 * q
+        command = stop(q, v, a, self.limits).command
+        self._emit(Send(command, None, now))
+        # what the arm runs from now on: a later stop without fresh states starts from it
+        self.trajectory = JtcTrajectory(command, q, v, now)
+        self.following = True
 
     def status(self) -> dict:
         """Return the run's part of the status document."""

@@ -19,9 +19,9 @@ import json
 
 import numpy as np
 from probdis_ros.bench import add_plan_command, straight_path_map
-from probdis_ros.model import arm_for_setting
+from probdis_ros.model import arm_for_setting, FailureMap
 from probdis_ros.model.edge_costs import EdgeCoster
-from probdis_ros.model.kernels import farthest_kernel
+from probdis_ros.model.tree_kernels import farthest_kernel, nearest_order
 from probdis_ros.planning import HardThresholdObjective, ProbRRT, RRTSettings
 from probdis_ros.planning.objectives import FailureProbabilityObjective
 import pytest
@@ -49,8 +49,19 @@ def same_plans(fast: ProbRRT, slow: ProbRRT, start, goal, fmap, seeds=range(3)) 
             assert a.rewires == b.rewires
 
 
+def clustered_map(arm, rng, n: int, spread: float = 0.05):
+    """Return n failures near the poses of a few configurations (a map grown in one place)."""
+    centers = arm.random_configurations(rng, 4)
+    configs = centers[rng.integers(0, 4, n)] + rng.normal(0.0, spread, (n, arm.n_joints))
+    poses = arm.fk(np.clip(configs, arm.lower, arm.upper))
+    fmap = FailureMap(arm.task_space, 100.0)
+    for i in range(n):
+        fmap.add(poses.positions[i], rng.normal(size=3), poses.orientations[i])
+    return fmap
+
+
 @pytest.mark.parametrize('settings', [
-    RRTSettings(), RRTSettings(rewire_factor=0.0),
+    RRTSettings(), RRTSettings(joint_margin=0.035), RRTSettings(rewire_factor=0.0),
     RRTSettings(iterations=30, closest_candidates=0, connect_candidates=0, rewire_radius=1.5)])
 def test_the_compiled_loop_plans_exactly_as_the_python_loop(settings):
     rng = np.random.default_rng(21)
@@ -63,10 +74,21 @@ def test_the_compiled_loop_plans_exactly_as_the_python_loop(settings):
                    fmap)
 
 
+def test_the_compiled_loop_plans_as_the_python_loop_on_large_maps_and_at_the_limits():
+    rng = np.random.default_rng(24)
+    start, goal = ARM.upper - 0.01, ARM.lower + 0.02      # within the margin of the limits
+    for fmap in (clustered_map(ARM, rng, 400), scattered_map(ARM, rng, 150)):
+        for settings in (RRTSettings(iterations=40), RRTSettings(iterations=40,
+                                                                 joint_margin=0.035)):
+            same_plans(ProbRRT(ARM, settings), ProbRRT(ARM, settings, compiled=False),
+                       start, goal, fmap, seeds=range(2))
+
+
 def test_pruning_far_failures_changes_no_cost_and_no_plan():
     rng = np.random.default_rng(22)
-    for failures in (5, 19, 150):
-        fmap = scattered_map(ARM, rng, failures)
+    for failures in (5, 19, 150, 400):
+        fmap = scattered_map(ARM, rng, failures) if failures < 400 else \
+            clustered_map(ARM, rng, failures)
         sources = ARM.random_configurations(rng, 40)
         target = ARM.random_configurations(rng, 1)[0]
         for objective in (FailureProbabilityObjective(), HardThresholdObjective(0.02)):
@@ -116,3 +138,27 @@ def test_the_farthest_sample_is_the_one_of_every_distance():
         samples, tree = rng.normal(size=(100, 3)), rng.normal(size=(nodes, 3))
         d2 = ((samples[:, None, :] - tree[None, :, :]) ** 2).sum(axis=2).min(axis=1)
         assert farthest_kernel(samples, tree) == int(np.argmax(d2))
+
+
+def test_the_k_nearest_are_a_stable_sorts_first_k():
+    rng = np.random.default_rng(25)
+    for trial in range(300):
+        size, k = int(rng.integers(1, 40)), int(rng.integers(0, 45))
+        # whole numbers: many equal distances, where the order of ties shows
+        nodes = rng.integers(0, 3, size=(size, 7)).astype(float) if trial % 2 else \
+            rng.normal(size=(size, 7))
+        config = rng.integers(0, 3, size=7).astype(float)
+        d2 = ((nodes - config) ** 2).sum(axis=1)
+        order = np.argsort(d2, kind='mergesort')
+        np.testing.assert_array_equal(nearest_order(nodes, size, config, k),
+                                      order[:k] if 0 < k < size else order)
+
+
+def test_bench_plan_prints_wall_and_cpu_time_and_the_load(capsys):
+    parser = argparse.ArgumentParser()
+    add_plan_command(parser.add_subparsers())
+    args = parser.parse_args(['plan', '--seeds', '1', '--large', '0'])
+    assert args.handler(args) == 0
+    out = capsys.readouterr().out
+    assert out.count('s wall, ') == 2 and out.count('s CPU') == 2
+    assert 'load average' in out

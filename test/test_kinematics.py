@@ -161,3 +161,31 @@ def test_rotation_to_quaternion_of_half_turns_about_diagonal_axes():
     assert (quats[:, 0] >= 0).all()
     back = quaternion_to_rotation(quats)
     assert np.abs(back - rotations).max() < 1e-12
+
+
+@pytest.mark.parametrize('setting', ['3d', '3d-orient'])
+def test_positions_alone_are_the_chain_kernels_positions(setting):
+    """The positions-only kernel skips the flange joint and the rotations, not a bit."""
+    from probdis_ros.model.kinematics import chain_kernel, position_joints
+
+    arm = arm_for_setting(setting)
+    configs = random_configs(arm, 20_000, seed=5)
+    positions = np.empty((len(configs), 3))
+    chain_kernel(configs, *arm.kernel_params(), positions, np.empty((len(configs), 3, 3)))
+    np.testing.assert_array_equal(arm.positions(configs), positions)
+    np.testing.assert_array_equal(arm.positions(configs), arm.fk(configs).positions)
+    rows = np.arange(len(configs)) % 3 == 0
+    some = arm.positions(configs, rows)
+    np.testing.assert_array_equal(some[rows], positions[rows])
+    assert not some[~rows].any()
+    _, codes, *_, tip_offset, _ = arm.kernel_params()
+    assert position_joints(codes, tip_offset) == 6     # the flange joint turns in place
+
+
+def test_planar_positions_of_some_rows():
+    arm = PlanarArm()
+    configs = random_configs(arm, 50, seed=6)
+    rows = np.arange(50) % 2 == 1
+    some = arm.positions(configs, rows)
+    np.testing.assert_array_equal(some[rows], arm.fk(configs[rows]).positions)
+    assert not some[~rows].any()

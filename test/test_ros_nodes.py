@@ -146,11 +146,13 @@ def test_malformed_joint_states_stop_the_run_safely(ros, tmp_path, names, positi
     ros.publish_state(None, names=names, positions=positions)
     wait_for(lambda: finished(ros), 5, 'run to stop')
     assert ros.status['state'] == 'stopped'
-    assert 'malformed joint state' in ros.status['message'] and reason in ros.status['message']
+    assert 'joint state refused' in ros.status['message'] and reason in ros.status['message']
     for q in ros.positions_commanded():
         assert np.all(np.isfinite(q)) and node.arm.within_limits(q)[0]
+    # the stop: from the last accepted state (or the command, had one begun), to rest
     last = ros.trajectories[-1][1]
-    assert len(last.points) == 1 and np.allclose(last.points[0].positions, START)
+    assert np.abs(np.array(last.points[0].positions) - START).max() < 0.02
+    assert np.allclose(last.points[-1].velocities, 0.0)
 
 
 def test_joint_states_out_of_order_with_extra_joints_are_matched_by_name(ros, tmp_path):
@@ -344,8 +346,8 @@ def test_a_fault_inside_the_run_stops_the_arm_and_the_node_lives_on(ros, tmp_pat
     node.run.on_joint_state = broken
     wait_for(lambda: finished(ros), 5, 'the run to stop')
     assert ros.status['state'] == 'stopped' and 'internal error' in ros.status['message']
-    last = ros.trajectories[-1][1]
-    assert np.allclose(last.points[-1].positions, START) and \
+    last = ros.trajectories[-1][1]        # the stop: at most where the command had begun
+    assert np.allclose(last.points[-1].positions, START, atol=1e-3) and \
         np.allclose(last.points[-1].velocities, 0.0)
     assert ros.call('start').success          # alive, and ready for the next run
 

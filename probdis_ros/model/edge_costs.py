@@ -18,7 +18,7 @@ Edge costs for the planner: many edges per call, compiled; the cheapest edge bes
 :class:`EdgeCoster` evaluates an edge cost given by :class:`EdgeTerms` (what an objective of
 :mod:`probdis_ros.planning.objectives` reduces to: the failure-probability cost of
 :func:`probdis_ros.model.path_cost.edge_cost`, or the Hard baseline's length-or-infinite)
-through the numba kernels in :mod:`probdis_ros.model.kernels`.  :class:`ReferenceEdgeCoster`
+through the numba kernels in :mod:`probdis_ros.model.edge_kernels`.  :class:`ReferenceEdgeCoster`
 is the straightforward numpy evaluation of the same numbers; the tests check that a planner
 gives the same paths with either.
 """
@@ -27,8 +27,12 @@ from __future__ import annotations
 
 import numpy as np
 from probdis_ros.model.arms import Arm, quaternion_to_rotation
+from probdis_ros.model.edge_kernels import (
+    AT_FAILURE,
+    cheapest_edge_kernel,
+    edge_costs_kernel,
+)
 from probdis_ros.model.failure_map import FailureMap
-from probdis_ros.model.kernels import AT_FAILURE, cheapest_edge_kernel, edge_costs_kernel
 from probdis_ros.model.path_cost import DEFAULT_DELTA, edge_points, EdgeTerms, P_MAX
 
 
@@ -71,7 +75,7 @@ class EdgeCoster:
         self.c_fail = float(fmap.c_fail if self.terms.c_fail is None else self.terms.c_fail)
         dim = arm.task_space.dim
         # points and directions padded to 3-D (z = 0 in 2-D); column-major, so that the
-        # kernels' bounds of all failures vectorise (kernels._chunk_probabilities)
+        # kernels' bounds of all failures vectorise (edge_kernels._chunk_probabilities)
         self._failures = (
             np.asfortranarray(_padded(fmap.points, dim)),
             np.asfortranarray(_padded(fmap.directions, dim)),

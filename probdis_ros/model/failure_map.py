@@ -39,7 +39,9 @@ import json
 import math
 import os
 from pathlib import Path
+import shutil
 import tempfile
+import time
 
 import numpy as np
 from probdis_ros.model.arms import TaskPoints, TaskSpace
@@ -70,6 +72,22 @@ def write_document(path: str | Path, doc: dict) -> None:
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+def set_aside(path: str | Path, why: str) -> Path:
+    """
+    Copy a map file that cannot be used here beside it, so that writing the map keeps it.
+
+    The copy is ``<name>.<why>-<date>-<time>[-k]`` in the same folder; OSError if it fails.
+    """
+    path = Path(path)
+    stem = f'{path.name}.{why}-{time.strftime("%Y%m%d-%H%M%S")}'
+    copy, k = path.with_name(stem), 1
+    while copy.exists():
+        k += 1
+        copy = path.with_name(f'{stem}-{k}')
+    shutil.copyfile(path, copy)
+    return copy
 
 
 def unit(vector: np.ndarray, norm: float | None = None) -> np.ndarray:
@@ -208,10 +226,15 @@ class FailureMap:
     def load(cls, path: str | Path) -> FailureMap:
         """Read a map file; a missing, partial or corrupt file raises FailureMapError."""
         path = Path(path)
+        if path.exists() and not path.is_file():     # a folder, a pipe (reading would hang)
+            raise FailureMapError(f'cannot read failure map {path}: not a regular file')
         try:
-            text = path.read_text()
+            text = path.read_text(encoding='utf-8')
         except OSError as err:
             raise FailureMapError(f'cannot read failure map {path}: {err.strerror}') from None
+        except UnicodeDecodeError as err:
+            raise FailureMapError(f'{path}: not a failure map (not UTF-8 text: {err.reason} '
+                                  f'at byte {err.start})') from None
         try:
             doc = json.loads(text)
         except json.JSONDecodeError as err:

@@ -21,24 +21,56 @@ more than the edge costs themselves.  Here the whole loop runs compiled, on the 
 :class:`probdis_ros.planning.tree.Tree`, calling the same edge kernels and the same
 helpers (:func:`nearest_order`, :func:`step_toward`) as the Python loop, in the same order
 and with the same floating-point operations, so that both give the same plan bit for bit
-(``test/test_planning_speed.py``).  The Python loop stays as the readable reference and
+(``test/test_bench_speed.py``).  The Python loop stays as the readable reference and
 serves arms without a compiled chain (the planar arm) and the reference coster.
+
+numba's cache (``cache=True``) is keyed by each module's own source: after an edit of
+:mod:`probdis_ros.model.edge_kernels` (or :mod:`~probdis_ros.model.kinematics`), the loops
+here may still run the cached code of the old edge kernels until this module changes or
+the ``__pycache__/*.nbi``/``*.nbc`` files are removed.  Remove them when measuring.
 """
 
 import math
 
 import numba
 import numpy as np
-from probdis_ros.model.kernels import (
-    chain_kernel,
+from probdis_ros.model.edge_kernels import (
     cheapest_edge_kernel,
     CHUNK,
     edge_cost_kernel,
-    farthest_kernel,
+    workspace,
 )
+from probdis_ros.model.kinematics import chain_kernel
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
+def farthest_kernel(samples, nodes):
+    """
+    Return the index of the sample whose nearest node is farthest (squared distances).
+
+    A sample is dropped as soon as a node nearer than the best so far is found: it can no
+    longer win, so the answer is the same as from every distance.
+    """
+    best = -1.0
+    best_index = 0
+    for i in range(samples.shape[0]):
+        nearest = np.inf
+        for k in range(nodes.shape[0]):
+            d2 = 0.0
+            for c in range(samples.shape[1]):
+                diff = samples[i, c] - nodes[k, c]
+                d2 += diff * diff
+            if d2 < nearest:
+                nearest = d2
+                if nearest <= best:
+                    break
+        if nearest > best:
+            best = nearest
+            best_index = i
+    return best_index
+
+
+@numba.njit(cache=True, nogil=True)
 def is_ancestor(parent, ancestor, node):
     """Tell whether ancestor lies on the way from node up to the root (node included)."""
     while node >= 0:
@@ -48,7 +80,7 @@ def is_ancestor(parent, ancestor, node):
     return False
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def reparent(parent, edge, costs, first_child, next_sibling, counts, index, new_parent,
              new_edge):
     """Move node index under new_parent (no cycle: checked by the caller); update its subtree."""
@@ -75,9 +107,14 @@ def reparent(parent, edge, costs, first_child, next_sibling, counts, index, new_
             child = next_sibling[child]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def nearest_order(nodes, size, config, k):
-    """Node indices by joint-space distance to config (stable; the k nearest if 0 < k)."""
+    """
+    Node indices by joint-space distance to config (stable; the k nearest if 0 < k).
+
+    The k nearest are kept by insertion (ties to the lower index), the same indices in the
+    same order as a stable sort's first k at a fraction of its cost.
+    """
     d2 = np.empty(size)
     for i in range(size):
         total = 0.0
@@ -85,13 +122,34 @@ def nearest_order(nodes, size, config, k):
             diff = nodes[i, j] - config[j]
             total += diff * diff
         d2[i] = total
-    order = np.argsort(d2, kind='mergesort')
-    return order[:k] if 0 < k < size else order
+    if not 0 < k < size:
+        return np.argsort(d2, kind='mergesort')
+    order = np.empty(k, dtype=np.int64)
+    kept = np.empty(k)
+    count = 0
+    for i in range(size):
+        value = d2[i]
+        if count == k and value >= kept[k - 1]:
+            continue
+        slot = min(count, k - 1)
+        while slot > 0 and kept[slot - 1] > value:
+            kept[slot] = kept[slot - 1]
+            order[slot] = order[slot - 1]
+            slot -= 1
+        kept[slot] = value
+        order[slot] = i
+        count = min(count + 1, k)
+    return order
 
 
-@numba.njit(cache=True)
-def step_toward(node, target, step, out):
-    """Write node + (target - node) * min(1, step / distance) to out; False if distance is 0."""
+@numba.njit(cache=True, nogil=True)
+def step_toward(node, target, step, out, low, high, clip):
+    """
+    Write node + (target - node) * min(1, step / distance) to out; False if distance is 0.
+
+    With ``clip``, the result is then clipped into [low, high] (the joint limits shrunk by
+    the planner's margin): a root within the margin of a limit steps into the shrunk box.
+    """
     total = 0.0
     for j in range(node.shape[0]):
         diff = target[j] - node[j]
@@ -102,18 +160,21 @@ def step_toward(node, target, step, out):
     scale = min(1.0, step / distance)
     for j in range(node.shape[0]):
         out[j] = node[j] + (target[j] - node[j]) * scale
+        if clip:
+            out[j] = min(max(out[j], low[j]), high[j])
     return True
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def neighbour_count(factor, n_joints, size):
     """Return RRT*'s k = ceil(factor e (1 + 1/d) log(n + 1)) (OMPL's k-nearest RRT*)."""
     return math.ceil(factor * math.e * (1 + 1 / n_joints) * math.log(size + 1))
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def grow_kernel(nodes, positions, parent, edge, costs, first_child, next_sibling, counts,
                 to_goal, samples, sample_positions, k_from, k_to, other_root, n_random, step,
+                low, high, clip,
                 rewire_factor, rewire_radius, closest_k, reverse, delta, length_weight,
                 risk_weight, cap, p_max, kind, joint_params, offsets, bases, tip_offset,
                 tip_rotation, f_points, f_dirs, f_rots, c_fail, use_orient, prune):
@@ -130,7 +191,7 @@ def grow_kernel(nodes, positions, parent, edge, costs, first_child, next_sibling
     rot = np.empty((1, 3, 3))
     buf_pos = np.empty((CHUNK, 3))
     buf_rot = np.empty((CHUNK, 3, 3))
-    soa = np.empty((12, CHUNK))
+    soa = workspace(f_points.shape[0])
     p_buf = np.empty(CHUNK)
     for k in range(k_from, k_to):
         size = counts[0]
@@ -149,7 +210,7 @@ def grow_kernel(nodes, positions, parent, edge, costs, first_child, next_sibling
             continue
         closest = candidates[best]
         # NewConfiguration
-        if not step_toward(nodes[closest], target, step, new):
+        if not step_toward(nodes[closest], target, step, new, low, high, clip):
             continue
         # RewireNeighbours: the cheapest parent among the neighbours
         if rewire_factor == 0:
@@ -209,7 +270,7 @@ def grow_kernel(nodes, positions, parent, edge, costs, first_child, next_sibling
                          out[i])
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def connect_kernel(start_nodes, start_costs, goal_nodes, goal_costs, goal_first_child,
                    connect_k, delta, length_weight, risk_weight, cap, p_max, kind,
                    joint_params, offsets, bases, tip_offset, tip_rotation, f_points, f_dirs,

@@ -34,6 +34,7 @@ from probdis_ros.model import iiwa_arm
 from probdis_ros.model.failure_map import FailureMap
 from probdis_ros.physics.simulated_robot import build_robot, RobotSettings
 from probdis_ros.planning import Disentangler, Method, RRTSettings, State
+from probdis_ros.planning.prob_rrt import ROBOT_JOINT_MARGIN
 from probdis_ros.run import Learned, PlanFrom, Run, RunSettings, Send
 
 
@@ -81,6 +82,8 @@ def run_physics_episode(scene: str, method: str | Method = 'probabilistic', seed
     scene_doc = robot.engine.scene
     arm = iiwa_arm()
     fmap = FailureMap(arm.task_space, method.map_c_fail())
+    # the planner node's default margin, so that offline runs plan as the node does
+    rrt = rrt or RRTSettings(joint_margin=ROBOT_JOINT_MARGIN)
     loop = Disentangler(arm, method.planner(arm, rrt), scene_doc.goal, fmap,
                         max_paths=max_paths, seed=seed, goal_tolerance=goal_tolerance,
                         min_retreat=min_retreat)

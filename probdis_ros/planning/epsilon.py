@@ -36,7 +36,8 @@ DEFAULT_EPSILON = 0.2
 class EpsilonPlanner:
     """Straight to the goal with probability epsilon, else a random direction."""
 
-    def __init__(self, arm: Arm, epsilon: float = DEFAULT_EPSILON, step: float = 1.0) -> None:
+    def __init__(self, arm: Arm, epsilon: float = DEFAULT_EPSILON, step: float = 1.0,
+                 joint_margin: float = 0.0) -> None:
         if not 0.0 <= epsilon <= 1.0:
             raise ValueError(f'epsilon must be in [0, 1], got {epsilon}')
         if step <= 0:
@@ -44,6 +45,11 @@ class EpsilonPlanner:
         self.arm = arm
         self.epsilon = epsilon
         self.step = step
+        # a random step stays this far inside the joint limits, as ProbRRT's via points do
+        self.low, self.high = arm.lower + joint_margin, arm.upper - joint_margin
+        if np.any(self.low >= self.high):
+            raise ValueError(f'joint_margin {joint_margin} leaves no room between the joint '
+                             'limits')
 
     def plan(self, start: np.ndarray, goal: np.ndarray, fmap: FailureMap,
              rng: np.random.Generator) -> Plan:
@@ -55,6 +61,6 @@ class EpsilonPlanner:
         else:
             direction = rng.normal(size=len(start))
             end = start + self.step * direction / np.linalg.norm(direction)
-            end = np.clip(end, self.arm.lower, self.arm.upper)
+            end = np.clip(end, self.low, self.high)
         path = np.array([start, end])
         return Plan(path, float(np.linalg.norm(end - start)), time.perf_counter() - t0)

@@ -118,7 +118,8 @@ class Method:
                 length_weight: float = DEFAULT_LENGTH_WEIGHT):
         """Return the planner of this method for an arm."""
         if self.name == 'epsilon':
-            return EpsilonPlanner(arm, DEFAULT_EPSILON if self.value is None else self.value)
+            return EpsilonPlanner(arm, DEFAULT_EPSILON if self.value is None else self.value,
+                                  joint_margin=settings.joint_margin if settings else 0.0)
         return ProbRRT(arm, settings, self.objective(length_weight))
 
 

@@ -40,7 +40,7 @@ an obstacle.  So:
 2. A region may be left but never entered: an edge that starts above Y may pass points above
    Y as long as their probability does not rise on the way out; an arm held where it was
    blocked (within 1 um of a failure point) counts as behind that failure, so it may back
-   out but not go on (:func:`probdis_ros.model.kernels._descend`).  Without this an arm
+   out but not go on (:func:`probdis_ros.model.edge_kernels._descend`).  Without this an arm
    whose retreat could not move it (blocked on its first motion) stood in a forbidden
    region and planned nothing for the rest of the episode.
 

@@ -29,6 +29,15 @@ iteration (Algorithm 2):
   (README "Planner speed").
 * NewConfiguration: a step of at most ``step`` (joint-space length) from that node toward the
   sample; both ends are inside the box of joint limits, so the step is too.
+
+Joint margin (beyond the paper): samples, new nodes and the smoothing's moves keep
+``joint_margin`` (0 by default, the paper's planner; ``ROBOT_JOINT_MARGIN`` = 0.035 rad, about
+2 degrees, on the robot) from every joint limit, so that no
+via point asks the arm to go right to a limit.  A start or goal inside the true limits but
+within the margin is accepted: its tree grows from it into the shrunk box (a new node is
+clipped into it), so the start and goal are the only via points that may lie outside it.
+``joint_margin = 0`` is the paper's planner, and gives the plans of before the margin bit
+for bit.
 * RewireNeighbours (RRT*): the new node takes the cheapest parent among its neighbours, and
   neighbours whose cost improves through it are re-parented (their subtrees' costs follow,
   :meth:`Tree.reparent`).  The paper does not say which neighbours; we take OMPL's RRT*
@@ -70,9 +79,11 @@ import numpy as np
 from probdis_ros.model.arms import Arm
 from probdis_ros.model.edge_costs import EdgeCoster
 from probdis_ros.model.failure_map import FailureMap
-from probdis_ros.model.kernels import farthest_kernel, PLANAR
+from probdis_ros.model.kinematics import PLANAR
+from probdis_ros.model.path_cost import DEFAULT_DELTA
 from probdis_ros.model.tree_kernels import (
     connect_kernel,
+    farthest_kernel,
     grow_kernel,
     nearest_order,
     neighbour_count,
@@ -81,13 +92,19 @@ from probdis_ros.model.tree_kernels import (
 from probdis_ros.planning.objectives import FailureProbabilityObjective, Objective
 from probdis_ros.planning.tree import Tree
 
+#: [rad] kept from every joint limit on the robot (planner node, robot experiment; about 2
+#: degrees): a plan never asks the arm to go right to a limit, where a controller's own
+#: margin (the real iiwa stops short of the URDF limits) would refuse it.  RRTSettings keeps
+#: 0, the paper's planner, so that the simulated sweeps reproduce it path for path.
+ROBOT_JOINT_MARGIN = 0.035
+
 
 @dataclass
 class RRTSettings:
     """ProbRRT parameters; defaults are the paper's where it gives them."""
 
     iterations: int = 100           # K, per tree
-    delta: float = 0.04             # discretisation of edges [rad]
+    delta: float = DEFAULT_DELTA    # discretisation of edges [rad]
     n_random: int = 100             # |C_RAND|
     p_goal: float = 0.1             # P_GOAL
     step: float = 1.0               # longest new edge [rad] (NewConfiguration)
@@ -98,6 +115,7 @@ class RRTSettings:
     refine_share: float = 0.5       # anytime: share of the budget kept for refining the path
     closest_candidates: int = 10    # k nearest in joint space are costed; 0: every node (paper)
     connect_candidates: int = 10    # likewise for Connect
+    joint_margin: float = 0.0       # [rad] kept from every joint limit; 0: none (the paper)
 
     def __post_init__(self) -> None:
         """Refuse settings the planner cannot work with."""
@@ -112,7 +130,8 @@ class RRTSettings:
                   (self.anytime_slice >= 1, 'anytime_slice must be >= 1'),
                   (0.0 <= self.refine_share < 1.0, 'refine_share must be in [0, 1)'),
                   (self.closest_candidates >= 0, 'closest_candidates must be >= 0'),
-                  (self.connect_candidates >= 0, 'connect_candidates must be >= 0')]
+                  (self.connect_candidates >= 0, 'connect_candidates must be >= 0'),
+                  (self.joint_margin >= 0, 'joint_margin must be >= 0')]
         for ok, message in checks:
             if not ok:
                 raise ValueError(message)
@@ -143,6 +162,13 @@ class ProbRRT:
         # the compiled loop where it can run (a chain arm, the compiled coster); the Python
         # loop is its reference, bit for bit
         self.compiled = compiled and arm.kernel_params()[0] != PLANAR
+        margin = self.settings.joint_margin
+        if np.any(self.arm.upper - self.arm.lower <= 2 * margin):
+            raise ValueError(f'joint_margin {margin} leaves no room between the joint limits')
+        # the box that samples, steps and smoothing keep to (a start or goal may lie
+        # between it and the limits: the trees grow from it into the box)
+        self.low = self.arm.lower + margin
+        self.high = self.arm.upper - margin
         self._warm_up()
 
     def _warm_up(self) -> None:
@@ -228,8 +254,9 @@ class ProbRRT:
         """
         s = self.settings
         to_goal = rng.random(iterations) < s.p_goal
-        samples = self.arm.random_configurations(rng, iterations * s.n_random)
-        return to_goal, samples, self.arm.positions(samples)
+        samples = self.arm.random_configurations(rng, iterations * s.n_random, s.joint_margin)
+        # only the samples of iterations that do not aim at the other root are looked at
+        return to_goal, samples, self.arm.positions(samples, np.repeat(~to_goal, s.n_random))
 
     def _grow_round(self, tree: Tree, other_root: np.ndarray, coster: EdgeCoster,
                     rng: np.random.Generator, iterations: int) -> None:
@@ -240,9 +267,9 @@ class ProbRRT:
             tree.reserve(iterations)
             grow_kernel(tree.nodes, tree.positions, tree.parent, tree.edge, tree.costs,
                         tree.first_child, tree.next_sibling, tree.counts, to_goal, samples,
-                        positions, 0, iterations, other_root, s.n_random, s.step,
-                        s.rewire_factor, s.rewire_radius, s.closest_candidates, tree.reverse,
-                        *coster.kernel_args())
+                        positions, 0, iterations, other_root, s.n_random, s.step, self.low,
+                        self.high, s.joint_margin > 0, s.rewire_factor, s.rewire_radius,
+                        s.closest_candidates, tree.reverse, *coster.kernel_args())
             return
         for k in range(iterations):
             if to_goal[k]:
@@ -271,7 +298,8 @@ class ProbRRT:
             return
         closest = candidates[best]
         new = np.empty(self.arm.n_joints)
-        if step_toward(tree.nodes[closest], target, s.step, new):
+        if step_toward(tree.nodes[closest], target, s.step, new, self.low, self.high,
+                       s.joint_margin > 0):
             self._insert(tree, new, closest, coster)
 
     def _neighbours(self, tree: Tree, config: np.ndarray, closest: int) -> np.ndarray:
@@ -368,14 +396,18 @@ class ProbRRT:
                     edges[i:j] = [direct]
                     break
             i += 1
-        lower, upper = self.arm.lower, self.arm.upper
+        lower, upper = self.low, self.high
+
+        def inside(q: np.ndarray) -> np.ndarray:
+            return np.clip(q, lower, upper)
+
         sigma = 0.1
         tries = 0
         while time.perf_counter() < deadline:
             tries += 1
             if tries % 50 == 0:                 # split the costliest edge at its middle
                 k = int(np.argmax(edges))
-                middle = (path[k] + path[k + 1]) / 2
+                middle = inside((path[k] + path[k + 1]) / 2)
                 first = edge(path[k], middle, edges[k])
                 second = edge(middle, path[k + 1], edges[k] - first)
                 if first + second <= edges[k]:
@@ -383,11 +415,11 @@ class ProbRRT:
                     edges[k:k + 1] = [first, second]
                 continue
             if len(path) < 3:
-                path.insert(1, (path[0] + path[1]) / 2)
+                path.insert(1, inside((path[0] + path[1]) / 2))
                 edges = [coster.cost(a, b) for a, b in pairwise(path)]
                 continue
             k = int(rng.integers(1, len(path) - 1))
-            moved = np.clip(path[k] + rng.normal(0.0, sigma, len(path[k])), lower, upper)
+            moved = inside(path[k] + rng.normal(0.0, sigma, len(path[k])))
             before = edges[k - 1] + edges[k]
             first = edge(path[k - 1], moved, before)
             second = edge(moved, path[k + 1], before - first) if first < before else np.inf

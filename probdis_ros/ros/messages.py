@@ -16,8 +16,9 @@
 Joint-state messages in and trajectories out, checked before anything moves.
 
 Incoming joint states are matched by name, in any order, extra joints ignored; a message
-with a missing joint, arrays of the wrong length, or a NaN/inf position is refused with the
-reason, never turned into a configuration.
+with a missing or twice-named joint, arrays of the wrong length, or a NaN/inf position is
+refused with the reason, never turned into a configuration (the checks against the arm
+itself, limits, time and jumps, are :mod:`probdis_ros.motion.state_check`).
 """
 
 from __future__ import annotations
@@ -25,26 +26,23 @@ from __future__ import annotations
 from builtin_interfaces.msg import Duration
 import numpy as np
 from probdis_ros.motion.jtc import TrajectoryCommand
+from probdis_ros.motion.state_check import (  # noqa: F401 (BadJointStateError: re-exported)
+    BadJointStateError,
+    positions_by_name,
+    values_by_name,
+)
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 
-class BadJointStateError(ValueError):
-    """A joint-state message that cannot be used, with the reason."""
-
-
 def joint_positions(msg: JointState, joint_names: list[str]) -> np.ndarray:
     """Return the positions of joint_names from msg, or raise BadJointStateError."""
-    if len(msg.position) != len(msg.name):
-        raise BadJointStateError(f'{len(msg.name)} names but {len(msg.position)} positions')
-    index = {name: i for i, name in enumerate(msg.name)}
-    missing = [name for name in joint_names if name not in index]
-    if missing:
-        raise BadJointStateError(f'missing joints {", ".join(missing)}')
-    q = np.array([msg.position[index[name]] for name in joint_names], dtype=float)
-    if not np.all(np.isfinite(q)):
-        raise BadJointStateError(f'non-finite positions {q.tolist()}')
-    return q
+    return positions_by_name(msg.name, msg.position, joint_names)
+
+
+def stamp_seconds(msg: JointState) -> float:
+    """Return a message's header stamp [s] (0 when unstamped)."""
+    return msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
 
 
 def duration(seconds: float) -> Duration:
@@ -76,11 +74,7 @@ def trajectory_msg(command: TrajectoryCommand, joint_names: list[str]) -> JointT
 
 def joint_velocities(msg: JointState, joint_names: list[str]) -> np.ndarray | None:
     """Return the velocities of joint_names from msg, None where it carries none usable."""
-    if len(msg.velocity) != len(msg.name):
-        return None
-    index = {name: i for i, name in enumerate(msg.name)}
-    v = np.array([msg.velocity[index[name]] for name in joint_names], dtype=float)
-    return v if np.all(np.isfinite(v)) else None
+    return values_by_name(msg.name, msg.velocity, joint_names)
 
 
 def command_from_msg(msg: JointTrajectory, joint_names: list[str], lower: np.ndarray,

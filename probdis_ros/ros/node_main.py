@@ -21,13 +21,36 @@ import sys
 
 import rclpy
 from rclpy._rclpy_pybind11 import RCLError
+from rclpy.exceptions import (
+    InvalidParameterTypeException,
+    InvalidParameterValueException,
+    ParameterException,
+)
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 
 
+def parameter_error(err: ParameterException) -> str:
+    """Return a start-up parameter refused by rclpy as one line naming it."""
+    if isinstance(err, InvalidParameterTypeException):
+        text = str(err).rsplit(': ', 1)[0]
+        if 'INTEGER' in text and 'DOUBLE' in text:
+            text += ' (write 1.0, not 1)'
+        return text
+    if isinstance(err, InvalidParameterValueException):
+        name = str(err).rsplit(': ', 1)[-1]
+        reason = str(err).split('Reason: ', 1)[-1].rsplit(': ', 1)[0]
+        return f'parameter {name}: {reason}'
+    return str(err)
+
+
 def run_node(name: str, factory: Callable[[], Node], args: list[str] | None = None) -> int:
     """Create the node, spin it, and always destroy it (which closes its files)."""
-    rclpy.init(args=args)
+    try:
+        rclpy.init(args=args)
+    except RCLError as err:            # unparsable --ros-args
+        print(f'{name}: error: {str(err).splitlines()[0]}', file=sys.stderr)
+        return 2
     node = None
     try:
         node = factory()
@@ -38,6 +61,9 @@ def run_node(name: str, factory: Callable[[], Node], args: list[str] | None = No
         # a signal can shut the context down while spin is setting up its wait set
         if rclpy.ok(context=node.context if node is not None else None):
             raise
+    except ParameterException as err:
+        print(f'{name}: error: {parameter_error(err)}', file=sys.stderr)
+        return 2
     except (ValueError, FileNotFoundError) as err:
         print(f'{name}: error: {err}', file=sys.stderr)
         return 2

@@ -22,9 +22,15 @@ planning runs in a worker thread so that joint states keep being read and checke
 plan is computed, and its result is picked up by a timer.
 
 Safety: every commanded position is inside the joint limits and timed within
-``velocity_scaling`` x the URDF velocity limits; malformed or stale joint states stop the
-run with a hold at the last good position; ``~/stop`` holds at once.  The failure map is
-written atomically after every new failure and reloaded at start-up.
+``velocity_scaling`` x the URDF velocity limits; every joint state passes
+:class:`~probdis_ros.motion.state_check.StateCheck` first, and one it refuses (malformed,
+outside the limits, time running back, a jump) is logged, stops a run (decelerating from the
+last accepted state) and refuses ``~/start`` for ``REFUSAL_HOLD`` seconds; stale joint states
+stop the run; ``~/stop`` decelerates to rest.  A start is refused without a subscriber on the
+trajectory topic (other than this node's recorder), and a run stops when it goes; a second
+node of this name refuses to start.  The failure map is written atomically after every new
+failure and reloaded at start-up; a file that cannot be read is copied aside, one that cannot
+be written is an error in the status and diagnostics (the run goes on, the map in memory).
 """
 
 from __future__ import annotations
@@ -35,26 +41,34 @@ from dataclasses import asdict
 import json
 import os
 from pathlib import Path
+import socket
 import sys
+import threading
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 import numpy as np
 from probdis_ros.model import FailureMap, FailureMapError, iiwa_arm
-from probdis_ros.model.failure_map import write_document
+from probdis_ros.model.failure_map import set_aside, write_document
 from probdis_ros.motion.detector import DetectorSettings
-from probdis_ros.motion.timing import hold_command
+from probdis_ros.motion.state_check import BadJointStateError, StateCheck, values_by_name
 from probdis_ros.planning import Disentangler, Method, METHODS, RRTSettings, State
+from probdis_ros.planning.prob_rrt import ROBOT_JOINT_MARGIN
+from probdis_ros.planning.warm_up import warm_up
 from probdis_ros.ros.markers import markers_msg
-from probdis_ros.ros.messages import (
-    BadJointStateError,
-    joint_positions,
-    joint_velocities,
-    trajectory_msg,
-)
+from probdis_ros.ros.messages import stamp_seconds, trajectory_msg
 from probdis_ros.ros.node_main import run_node
 from probdis_ros.ros.recorder import BagRecorder
-from probdis_ros.run import Learned, PlanFrom, Run, RunSettings, Send, StatusChanged
+from probdis_ros.run import (
+    Learned,
+    PlanCancelledError,
+    PlanFrom,
+    rest_command,
+    Run,
+    RunSettings,
+    Send,
+    StatusChanged,
+)
 from rcl_interfaces.msg import (
     FloatingPointRange,
     IntegerRange,
@@ -76,7 +90,15 @@ RUN, DETECT = RunSettings(), RunSettings().detection
 RUN_FIELDS = ('velocity_scaling', 'acceleration_scaling', 'acceleration_limit', 'jerk_limit',
               'state_timeout', 'replan_tolerance')
 DETECTOR_FIELDS = ('d_dist', 'stall_time', 'stall_motion', 'settle_time', 'motion_delay',
-                   'gap_ceiling', 'joint_gap_ceiling', 'onset_gap', 'echo_time')
+                   'gap_ceiling', 'joint_gap_ceiling', 'onset_gap', 'echo_time',
+                   'torque_ceiling', 'load_mass', 'load_com')
+#: After a refused joint state, ~/start is refused for this long [s].
+REFUSAL_HOLD = 1.0
+#: How often the graph is checked: the trajectory topic's subscribers, namesakes [s].
+GRAPH_CHECK = 0.5
+#: A new planner refuses ~/start this long while a namesake shows in the graph: time to hear
+#: the namesake's ``~/instance`` announcement (the younger of two leaves) [s].
+DISCOVERY_WAIT = 3.0
 
 
 def _float(text: str, low: float, high: float) -> ParameterDescriptor:
@@ -130,6 +152,13 @@ PARAMETERS = {
                                            '[rad]', 0.001, 1.0)),
     'echo_time': (DETECT.echo_time, _float('seconds of lag-free motion that reveal a driver '
                                            'echoing the command; 0: off', 0.0, 10.0)),
+    'torque_ceiling': (DETECT.torque_ceiling, _float(
+        'external torque [Nm] at a joint (measured effort minus the gravity of arm and load) '
+        'that is a block at once; needs efforts in the joint states; 0: off', 0.0, 500.0)),
+    'load_mass': (DETECT.load_mass, _float('mass of the grasped load [kg], for the external '
+                                           'torque estimate', 0.0, 30.0)),
+    'load_com': (list(DETECT.load_com), ParameterDescriptor(
+        description="the load's centre of mass [m] in the flange frame, 3 values")),
     'replan_tolerance': (RUN.replan_tolerance, _float('L1 distance [rad] between the arm and '
                                                       "a plan's start above which it plans "
                                                       'again from the arm', 0.001, 1.0)),
@@ -152,6 +181,8 @@ PARAMETERS = {
     'n_random': (100, _int('|C_RAND|: samples per RandomConfiguration', 1, 100000)),
     'p_goal': (0.1, _float('P_GOAL', 0.0, 1.0)),
     'step': (1.0, _float('longest new tree edge [rad]', 0.01, 10.0)),
+    'joint_margin': (ROBOT_JOINT_MARGIN, _float(
+        'distance [rad] that samples and via points keep from every joint limit', 0.0, 0.5)),
     # 0 until a budget is shown to disentangle better (README "Planning and simulation")
     'plan_time': (0.0, _float('anytime budget [s]: the trees keep growing in rounds of K '
                               'while it lasts; 0: one round of K (the paper)', 0.0, 60.0)),
@@ -172,6 +203,8 @@ class PlannerNode(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__(NODE_NAME, **kwargs)
+        self.started = time.monotonic()
+        self.namesake_heard = False
         for name, (default, descriptor) in PARAMETERS.items():
             self.declare_parameter(name, default, descriptor)
         self.add_on_set_parameters_callback(self._check_parameters)
@@ -183,15 +216,33 @@ class PlannerNode(Node):
             raise ValueError('joint_names must name 7 joints')
         if problem:
             self.get_logger().warning(f'goal parameter: {problem}; ~/start will refuse')
-        self.fmap = self._load_map()
         self.planner = self._make_planner()   # loads the compiled kernels now, not at ~/start
+        namesake = self._namesake()
+        if namesake:                      # in this process: the graph is complete at once
+            Node.destroy_node(self)
+            raise ValueError(namesake + '; not starting a second one')
+        self.errors: dict[str, str] = {}      # recording: set and read in the executor thread
+        self.map_error = ''                    # set by the I/O thread
+        self.map_writable = True
+        self.fmap = self._load_map()
+        # compile (or load) every kernel a run calls now: at the first block it would hold the
+        # executor for seconds while the retreat must be watched (short plans do: the
+        # anytime budget only repeats the same kernels)
+        seconds = warm_up(self.arm, self._make_planner(longest_plan=0.05),
+                          float(self.get_parameter('c_fail').value))
+        self.get_logger().info(f'planner kernels ready in {seconds:.1f} s')
+        self.state_check = StateCheck(self.joint_names, self.arm.lower, self.arm.upper,
+                                      self.arm.velocity_limits)
         self.measured: np.ndarray | None = None
+        self.measured_velocity: np.ndarray | None = None
         self.measured_at = -np.inf
         self.run: Run | None = None
         self._ended_run: Run | None = None
         self.plan_future: Future | None = None
-        self.worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix='probdis_plan')
         self.io = ThreadPoolExecutor(max_workers=1, thread_name_prefix='probdis_io')
+        self._graph_checked = -np.inf
+        self.foreign_at, self.foreign = -np.inf, ''
+        self._published_errors: list[str] = []
         self.traj_pub = self.create_publisher(
             JointTrajectory, self.get_parameter('trajectory_topic').value, 10)
         latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -213,12 +264,21 @@ class PlannerNode(Node):
         self._record_topics = [
             (self.get_parameter('joint_states_topic').value, JointState, None),
             (self.get_parameter('trajectory_topic').value, JointTrajectory, 100),
-            (f'{self.get_fully_qualified_name()}/status', String, latched),
+            # a queue, not the latched depth of 1: two statuses in a row must both be kept
+            (f'{self.get_fully_qualified_name()}/status', String,
+             QoSProfile(depth=100, durability=DurabilityPolicy.TRANSIENT_LOCAL)),
             (f'{self.get_fully_qualified_name()}/failures', String, 100)]
         for topic, msg_type, qos in self._record_topics[1:]:
             self.create_subscription(msg_type, topic,
                                      lambda data, info, t=topic: self._record(t, data, info),
                                      qos, raw=True)
+        # every planner announces itself on a latched topic its namesakes share: the younger
+        # of two learns of the other there even when discovery was too slow for the check
+        self.instance = {'pid': os.getpid(), 'host': socket.gethostname(),
+                         'started_at': time.time()}
+        self.create_subscription(String, '~/instance', self._on_instance, latched)
+        self.create_publisher(String, '~/instance', latched).publish(
+            String(data=json.dumps(self.instance)))
         self.create_service(Trigger, '~/start', self._on_start)
         self.create_service(Trigger, '~/stop', self._on_stop)
         self.create_service(Trigger, '~/reset_map', self._on_reset_map)
@@ -226,6 +286,49 @@ class PlannerNode(Node):
         self.create_timer(1.0, self._publish_diagnostics)
         self._publish_status()
         self.get_logger().info(f'{NODE_NAME} ready: {len(self.fmap)} failures in the map')
+
+    def _namesake(self) -> str:
+        """Return what is wrong when the graph shows another node of this name ('' if not)."""
+        me = (self.get_name(), self.get_namespace())
+        if self.get_node_names_and_namespaces().count(me) > 1:
+            return (f'another node named {self.get_fully_qualified_name()} is running '
+                    f'(it would share the services, the map and the bag folder)')
+        return ''
+
+    def _namesake_refusal(self) -> str:
+        """
+        Return why ~/start is refused for a namesake ('' if it is not).
+
+        One that announced itself, or any in the graph while this node is new (its
+        announcement may still come).  A namesake killed with SIGKILL stays in the graph for
+        a while without announcing itself: it does not block a restarted planner for long.
+        """
+        namesake = self._namesake()
+        if namesake and (self.namesake_heard or
+                         time.monotonic() - self.started < DISCOVERY_WAIT):
+            return namesake
+        return ''
+
+    def _on_instance(self, msg: String) -> None:
+        """Leave (an error out of spin: exit 2) if an older namesake runs; else warn of it."""
+        other = json.loads(msg.data)
+        if other == self.instance:
+            return
+        message = (f'another node named {self.get_fully_qualified_name()} is running '
+                   f'(pid {other.get("pid")} on {other.get("host")})')
+        if (other.get('started_at', 0.0), other.get('pid', 0)) < \
+                (self.instance['started_at'], self.instance['pid']):
+            if self.active:
+                self._guarded(self.run.stop, message)
+            raise ValueError(message + '; not starting a second one')
+        self.namesake_heard = True
+        self.get_logger().error(f'{message}: ~/start is refused while it runs')
+
+    def _command_subscribers(self) -> int:
+        """Return how many subscribers other than this node's recorder the commands have."""
+        me = (self.get_name(), self.get_namespace())
+        return sum((info.node_name, info.node_namespace) != me
+                   for info in self.get_subscriptions_info_by_topic(self.traj_pub.topic_name))
 
     # -- parameters --------------------------------------------------------------------
 
@@ -255,31 +358,67 @@ class PlannerNode(Node):
     # -- the failure map ---------------------------------------------------------------
 
     def _load_map(self) -> FailureMap:
+        """
+        Read map_file; one that cannot be used here is named in one line and kept aside.
+
+        A file that is not a map, or a map of another task space, is copied beside itself
+        (``set_aside``) before the first failure overwrites it; a path that is not a regular
+        file, or a file that cannot be copied, is not written at all (an error in the status).
+        """
         c_fail = float(self.get_parameter('c_fail').value)
+        empty = FailureMap(self.arm.task_space, c_fail)
         path = self.get_parameter('map_file').value
-        if path and Path(path).exists():
-            try:
-                fmap = FailureMap.load(path)
-                if fmap.task_space is self.arm.task_space:
-                    return fmap
-                self.get_logger().error(f'{path} is a {fmap.task_space.value} map; '
-                                        f'starting with an empty one')
-            except FailureMapError as err:
-                self.get_logger().error(f'{err}; starting with an empty map')
-        return FailureMap(self.arm.task_space, c_fail)
+        if not path or not os.path.lexists(path):
+            return empty
+        try:
+            fmap = FailureMap.load(path)
+        except FailureMapError as err:
+            if not Path(path).is_file():
+                return self._map_unusable(f'{err}; the map is kept in memory only')
+            why, problem = 'unreadable', str(err)
+        else:
+            if fmap.task_space is self.arm.task_space:
+                return fmap
+            why = fmap.task_space.value
+            problem = (f'{path} is a {fmap.task_space.value} map, this arm needs '
+                       f'{self.arm.task_space.value}')
+        try:
+            copy = set_aside(path, why)
+        except OSError as err:
+            return self._map_unusable(f'{problem}; it cannot be copied aside ({err.strerror}), '
+                                      f'so it is not overwritten: the map is kept in memory only')
+        self.get_logger().error(f'{problem}; kept it as {copy}; starting with an empty map')
+        return empty
+
+    def _map_unusable(self, message: str) -> FailureMap:
+        self.get_logger().error(message)
+        self.map_error, self.map_writable = message, False
+        return FailureMap(self.arm.task_space, float(self.get_parameter('c_fail').value))
 
     def _save_map(self) -> Future | None:
-        """Write the map in the I/O thread (a snapshot, in order), off the executor thread."""
+        """Write the map in the I/O thread (a snapshot, in order); the future says if it did."""
         path = self.get_parameter('map_file').value
-        if path:
-            return self.io.submit(self._write_map, path, self.fmap.to_dict())
-        return None
+        if not path:
+            return None
+        if not self.map_writable:
+            done: Future = Future()
+            done.set_result(False)
+            return done
+        return self.io.submit(self._write_map, path, self.fmap.to_dict())
 
-    def _write_map(self, path: str, doc: dict) -> None:
+    def _write_map(self, path: str, doc: dict, persist: bool = True) -> bool:
+        """Write a map document; a failure is logged and, for map_file, kept in map_error."""
         try:
             write_document(path, doc)
         except OSError as err:
-            self.get_logger().error(f'cannot write the failure map {path}: {err}')
+            message = f'cannot write the failure map {path}: {err}'
+            self.get_logger().error(message)
+            if persist:
+                self.map_error = message + ' (the map is kept in memory)'
+            return False
+        if persist:
+            self.map_error = ''
+        return True
 
     def _publish_markers(self, path: np.ndarray | None) -> None:
         """Build and publish the RViz markers in the I/O thread (they take milliseconds)."""
@@ -314,9 +453,26 @@ class PlannerNode(Node):
             return False, 'a run is already active; call ~/stop first'
         if self.use_sim_time and self.get_clock().now().nanoseconds == 0:
             return False, 'use_sim_time is set but no /clock has arrived; is the simulation on?'
-        age = self._now() - self.measured_at
+        namesake = self._namesake_refusal()
+        if namesake:
+            return False, namesake
+        now = self._now()
+        refused = self.state_check.refused_within(now, REFUSAL_HOLD)
+        if refused:
+            return False, (f'joint states were refused {now - self.state_check.refused_at:.1f} s '
+                           f'ago ({refused}); not starting')
+        age = now - self.measured_at
         if self.measured is None or age > self.get_parameter('state_timeout').value:
             return False, 'no fresh joint state has arrived; is the arm (driver) running?'
+        if not self._command_subscribers():
+            return False, (f'nothing subscribes to {self.traj_pub.topic_name}: no controller '
+                           f'would execute the commands; is joint_trajectory_controller active?')
+        publishers = self._other_publishers()
+        if publishers:
+            return False, (f'{", ".join(publishers)} also publishes on '
+                           f'{self.traj_pub.topic_name}: its commands would be taken for ours')
+        if now - self.foreign_at <= REFUSAL_HOLD:
+            return False, f'{self.foreign} {now - self.foreign_at:.1f} s ago; not starting'
         goal = self.get_parameter('goal').value
         problem = self._goal_problem(goal)
         if problem:
@@ -333,9 +489,13 @@ class PlannerNode(Node):
         settings = RunSettings(**{name: value(name).value for name in RUN_FIELDS},
                                detection=detection)
         self.run = Run(self.arm, loop, settings, clock=self._now)
+        self.plan_future = None
         self._open_bag()
-        self._guarded(self.run.start, self.measured_at, self.measured)
-        return True, f'disentangling from {np.round(self.measured, 3).tolist()}'
+        start = self.measured.copy()
+        self._guarded(self.run.start, self.measured_at, start, self.measured_velocity)
+        if self.run.outcome == 'succeeded':
+            return True, f'already at the goal ({np.round(start, 3).tolist()}): nothing to do'
+        return True, f'disentangling from {np.round(start, 3).tolist()}'
 
     # -- recording -----------------------------------------------------------------------
 
@@ -345,20 +505,47 @@ class PlannerNode(Node):
         if not folder:
             return
         name = time.strftime('run_%Y%m%d_%H%M%S')
-        path = Path(folder) / name
-        suffix = 1
-        while path.exists():
-            suffix += 1
-            path = Path(folder) / f'{name}_{suffix}'
-        try:
-            self.recorder = BagRecorder(path)
-        except OSError as err:
-            self.get_logger().error(f'cannot record to {path}: {err}')
+        path, suffix = Path(folder) / name, 1
+        self.bag_path = ''
+        self.errors.pop('recording', None)
+        for _ in range(10):       # another recorder may take the same name meanwhile
+            while os.path.lexists(path):
+                suffix += 1
+                path = Path(folder) / f'{name}_{suffix}'
+            try:
+                recorder = BagRecorder(path)
+                break
+            except Exception as err:    # OSError, rosbags' WriterError: never the node
+                if os.path.lexists(path):
+                    continue            # taken meanwhile: the next name
+                self._recording_failed(f'cannot record to {path}: {err}')
+                return
+        else:
+            self._recording_failed(f'cannot record to {path}: the name is taken')
             return
         for topic, msg_type, _ in self._record_topics:
             module = msg_type.__module__.split('.')[0]
-            self.recorder.add_topic(topic, f'{module}/msg/{msg_type.__name__}')
-        self.bag_path = str(path)
+            recorder.add_topic(topic, f'{module}/msg/{msg_type.__name__}')
+        self.recorder, self.bag_path = recorder, str(path)
+        self._check_recorder()
+
+    def _recording_failed(self, message: str) -> None:
+        """Stop recording; the run goes on (supervising the arm matters more), the user told."""
+        self.errors['recording'] = f'{message}; the run goes on unrecorded'
+        self.get_logger().error(self.errors['recording'])
+        self._publish_status()
+
+    def _check_recorder(self) -> None:
+        recorder = self.recorder
+        if recorder is not None and recorder.error:
+            self.recorder = None
+            self.recorder_close_at = None
+            self._recording_failed(recorder.error)
+
+    def _write_bag(self, topic: str, stamp_ns: int, data: bytes) -> None:
+        if self.recorder is not None:
+            self.recorder.write(topic, stamp_ns, data)
+            self._check_recorder()
 
     def _record(self, topic: str, data: bytes, info: dict) -> None:
         """
@@ -367,58 +554,101 @@ class PlannerNode(Node):
         That is its receive time, except for this node's own commands: they are stamped with
         the time the detector began to watch them, so that a replay judges them alike.
         """
-        if self.recorder is None:
-            return
         stamp = self._receive_time(info)
-        if topic == self._record_topics[1][0] and self._sent:
-            stamp = self._sent.popleft()
-        self.recorder.write(topic, round(stamp * 1e9), data)
+        if topic == self._record_topics[1][0]:
+            if self._sent:
+                stamp = self._sent.popleft()
+            else:
+                self._foreign_command(stamp)
+        self._write_bag(topic, round(stamp * 1e9), data)
+
+    def _foreign_command(self, now: float) -> None:
+        """Another node commanded the arm: stop the run (its motion is no block to learn)."""
+        publishers = self._other_publishers()
+        self.foreign_at = now
+        self.foreign = (f'a command on {self.traj_pub.topic_name} that this node did not send'
+                        + (f' (from {", ".join(publishers)})' if publishers else ''))
+        self.get_logger().error(self.foreign, throttle_duration_sec=1.0)
+        if self.active:
+            self._guarded(self.run.stop, f'{self.foreign}; stopped, nothing learned from it')
+
+    def _other_publishers(self) -> list[str]:
+        """Return the nodes other than this one that publish on the trajectory topic."""
+        me = (self.get_name(), self.get_namespace())
+        return sorted({f'{info.node_namespace.rstrip("/")}/{info.node_name}'
+                       for info in self.get_publishers_info_by_topic(self.traj_pub.topic_name)
+                       if (info.node_name, info.node_namespace) != me})
 
     def _close_bag(self) -> None:
         if self.recorder is not None:
             recorder, self.recorder = self.recorder, None
             recorder.close()
-            message = f'recorded {recorder.count} messages to {recorder.path}'
+            if recorder.error:
+                self.errors['recording'] = recorder.error
+                message = recorder.error
+            else:
+                message = f'recorded {recorder.count} messages to {recorder.path}'
             if self.context.ok():
                 self.get_logger().info(message)
             else:                 # shutting down after SIGINT/SIGTERM: rosout is gone
                 print(f'[{NODE_NAME}] {message}', file=sys.stderr)
         self.recorder_close_at = None
 
-    def _make_planner(self):
+    def _make_planner(self, longest_plan: float | None = None):
+        """Return the planner the parameters ask for (its budget capped at longest_plan [s])."""
+        plan_time = self.get_parameter('plan_time').value
+        if longest_plan is not None:
+            plan_time = min(plan_time, longest_plan)
         settings = RRTSettings(
             iterations=self.get_parameter('iterations').value,
             delta=self.get_parameter('delta').value,
             n_random=self.get_parameter('n_random').value,
             p_goal=self.get_parameter('p_goal').value, step=self.get_parameter('step').value,
-            plan_time=self.get_parameter('plan_time').value)
+            plan_time=plan_time,
+            joint_margin=self.get_parameter('joint_margin').value)
         method = Method.from_parameters(self.get_parameter('method').value,
                                         self.get_parameter('threshold').value,
                                         self.get_parameter('epsilon').value)
         return method.planner(self.arm, settings, self.get_parameter('length_weight').value)
 
     def _on_stop(self, request, response):
-        if not self.active:
-            if self.measured is not None:
-                self.traj_pub.publish(trajectory_msg(hold_command(self.measured),
-                                                     self.joint_names))
-            response.success, response.message = True, 'no run active; holding'
+        """Stop the run and its planning; the arm decelerates to rest, whatever it was doing."""
+        if self.run is not None:
+            active = self.active
+            self._guarded(self.run.stop, 'stopped on request')
+            response.success, response.message = True, (
+                'stopped; decelerating to rest' if active else
+                'no run active; decelerating to rest')
             return response
-        self._guarded(self.run.stop, 'stopped on request')
-        response.success, response.message = True, 'stopped; holding the measured position'
+        fresh = self._now() - self.measured_at <= self.get_parameter('state_timeout').value
+        if fresh:
+            settings = RunSettings(**{name: self.get_parameter(name).value
+                                      for name in RUN_FIELDS})
+            command = rest_command(self.arm, settings.limits(self.arm), self.measured,
+                                   self.measured_velocity)
+            self.traj_pub.publish(trajectory_msg(command, self.joint_names))
+            self._sent.append(self._now())
+        response.success, response.message = True, (
+            'no run active; decelerating to rest' if fresh else
+            'no run active and no fresh joint state: nothing commanded')
         return response
 
     def _on_reset_map(self, request, response):
         if self.active:
             response.success, response.message = False, 'a run is active; call ~/stop first'
             return response
-        count = len(self.fmap)
+        count, kept = len(self.fmap), self.fmap.to_dict()
         self.fmap.clear()
         written = self._save_map()
-        if written is not None:
-            written.result(timeout=10.0)   # "cleared" means cleared on disk too
+        # "cleared" means cleared on disk too; if not, nothing changes, in memory either
+        if written is not None and not written.result(timeout=10.0):
+            self.fmap = FailureMap.from_dict(kept)
+            response.success, response.message = False, (
+                f'not cleared: {self.map_error or "the map file cannot be written"}; the map '
+                f'keeps its {count} failures')
+        else:
+            response.success, response.message = True, f'cleared {count} failures'
         self._publish_status()
-        response.success, response.message = True, f'cleared {count} failures'
         return response
 
     # -- the run: events into Run, its actions out ------------------------------------
@@ -439,7 +669,7 @@ class PlannerNode(Node):
                 if action.path is not None:
                     self._publish_markers(action.path)
             elif isinstance(action, PlanFrom):
-                self.plan_future = self.worker.submit(run.loop.next_path, action.config)
+                self.plan_future = _in_thread(run.loop.next_path, action.config)
             elif isinstance(action, Learned):
                 self.failure_pub.publish(String(data=json.dumps(action.event)))
                 self._save_map()
@@ -447,8 +677,12 @@ class PlannerNode(Node):
                 self.get_logger().info(run.message)
             elif isinstance(action, StatusChanged):
                 if not run.active:
+                    self.plan_future = None     # cancelled by the run; its result is dropped
                     self._ended()
                 self._publish_status()
+            if self.recorder is not None:
+                self.recorder.flush()           # commands, failures, status: on disk now
+                self._check_recorder()
 
     def _ended(self) -> None:
         """
@@ -467,7 +701,7 @@ class PlannerNode(Node):
         if self.run.outcome in ('succeeded', 'gave_up'):
             if self.bag_path:
                 self.io.submit(self._write_map, str(Path(self.bag_path) / 'failure_map.json'),
-                               self.fmap.to_dict())
+                               self.fmap.to_dict(), False)
             self.fmap = FailureMap(self.arm.task_space, self.fmap.c_fail)
             self._save_map()
 
@@ -475,6 +709,15 @@ class PlannerNode(Node):
         now = self._now()
         if self.recorder_close_at is not None and now >= self.recorder_close_at:
             self._close_bag()
+        recorder = self.recorder
+        if recorder is not None and time.monotonic() - recorder.flushed_at >= \
+                recorder.flush_interval:
+            recorder.flush()
+            self._check_recorder()
+        if self._errors() != self._published_errors:      # e.g. from the I/O thread
+            self._publish_status()
+        if time.monotonic() - self._graph_checked >= GRAPH_CHECK:
+            self._check_graph()
         if self.run is None:
             return
         self._guarded(self.run.tick, now)
@@ -482,37 +725,56 @@ class PlannerNode(Node):
             future, self.plan_future = self.plan_future, None
             try:
                 path = future.result()
+            except PlanCancelledError:
+                return
             except Exception as err:   # a planner bug must not leave the arm moving
                 self.get_logger().error(f'planning failed: {err!r}')
                 self._guarded(self.run.plan_failed, err)
             else:
                 self._guarded(self.run.on_plan, path)
 
+    def _check_graph(self) -> None:
+        """Stop a run whose commands nobody executes; warn of a namesake once."""
+        self._graph_checked = time.monotonic()
+        if not self._namesake():
+            self.namesake_heard = False       # it has gone
+        if self.active and not self._command_subscribers():
+            self._guarded(self.run.stop, f'nothing subscribes to {self.traj_pub.topic_name} '
+                                         f'any more: the controller is gone; stopped')
+        publishers = self._other_publishers() if self.active else []
+        if publishers:
+            self._guarded(self.run.stop, f'{", ".join(publishers)} also publishes on '
+                                         f'{self.traj_pub.topic_name}; stopped')
+
     def _on_joint_state(self, data: bytes, info: dict) -> None:
         try:
             msg = deserialize_message(data, JointState)
         except Exception as err:   # undecodable bytes must not stop the node
             self._record(self._record_topics[0][0], data, info)
-            self.get_logger().error(f'joint state undecodable: {err}', throttle_duration_sec=1.0)
+            now = self._receive_time(info)
+            self.state_check.refuse(now, f'undecodable: {err}')
+            self._refused(f'undecodable: {err}')
             return
-        stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        stamp = stamp_seconds(msg)
         # on simulated time the stamp is the sample's time; the node's clock may already
         # have moved on when a busy executor gets to the message
         now = stamp if self.use_sim_time and stamp > 0 else self._receive_time(info)
-        if self.recorder is not None:
-            self.recorder.write(self._record_topics[0][0], round(now * 1e9), data)
+        self._write_bag(self._record_topics[0][0], round(now * 1e9), data)
         try:
-            q = joint_positions(msg, self.joint_names)
+            q, v = self.state_check.check(now, msg.name, msg.position, msg.velocity, stamp)
         except BadJointStateError as err:
-            self.get_logger().error(f'joint state refused: {err}',
-                                    throttle_duration_sec=1.0)
-            if self.run is not None:
-                self._guarded(self.run.bad_joint_state, str(err))
+            self._refused(str(err))
             return
-        self.measured, self.measured_at = q, now
+        self.measured, self.measured_velocity, self.measured_at = q, v, now
         if self.run is not None:
-            self._guarded(self.run.on_joint_state, now, q,
-                          joint_velocities(msg, self.joint_names))
+            effort = values_by_name(msg.name, msg.effort, self.joint_names)
+            self._guarded(self.run.on_joint_state, now, q, v, effort)
+
+    def _refused(self, reason: str) -> None:
+        """Log a refused joint state; a run stops, decelerating from the last accepted one."""
+        self.get_logger().error(f'joint state refused: {reason}', throttle_duration_sec=1.0)
+        if self.run is not None:
+            self._guarded(self.run.bad_joint_state, reason)
 
     def _guarded(self, event, *args) -> None:
         """Feed the run an event; a bug in it stops the run safely instead of the node."""
@@ -535,9 +797,14 @@ class PlannerNode(Node):
                       'last_replan_latency_s': None, 'replan_latencies_s': [],
                       'outcome': '', 'message': 'ready'}
         failures = status.get('failures', 0) if self.run is not None else len(self.fmap)
-        return {**status, 'failures': failures, 'bag': self.bag_path}
+        return {**status, 'failures': failures, 'bag': self.bag_path, 'errors': self._errors()}
+
+    def _errors(self) -> list[str]:
+        """Return the file faults in effect: recording, map persistence."""
+        return [e for e in (self.errors.get('recording', ''), self.map_error) if e]
 
     def _publish_status(self) -> None:
+        self._published_errors = self._errors()
         self.status_pub.publish(String(data=json.dumps(self.status())))
         self._publish_diagnostics()
 
@@ -546,8 +813,12 @@ class PlannerNode(Node):
         level = DiagnosticStatus.OK
         if status['state'] in ('stopped', 'gave_up'):
             level = DiagnosticStatus.WARN
+        message = status['message']
+        if status['errors']:
+            level = DiagnosticStatus.ERROR
+            message = '; '.join([message, *status['errors']])
         diag = DiagnosticStatus(level=level, name=f'{NODE_NAME}: disentangling',
-                                hardware_id='lbr_iiwa14', message=status['message'])
+                                hardware_id='lbr_iiwa14', message=message)
         diag.values = [KeyValue(key=k, value=str(v)) for k, v in status.items()
                        if k not in ('replan_latencies_s', 'detection')]
         msg = DiagnosticArray(status=[diag])
@@ -555,11 +826,32 @@ class PlannerNode(Node):
         self.diag_pub.publish(msg)
 
     def destroy_node(self) -> None:
-        """Close the bag and stop the worker thread with the node."""
+        """Close the bag, cancel planning (its thread is a daemon), finish the map writes."""
         self._close_bag()
-        self.worker.shutdown(wait=False, cancel_futures=True)
+        if self.run is not None and self.run.active:
+            self.run.loop.planner.cancel()
         self.io.shutdown(wait=True)     # the last map write finishes
         super().destroy_node()
+
+
+def _in_thread(function, *args) -> Future:
+    """
+    Run function(*args) in a daemon thread of its own; return its future.
+
+    A plan abandoned by ~/stop runs on in its thread without delaying the next run's
+    planning, and does not keep the process alive after SIGINT.
+    """
+    future: Future = Future()
+
+    def work() -> None:
+        if not future.set_running_or_notify_cancel():
+            return
+        try:
+            future.set_result(function(*args))
+        except BaseException as err:    # handed to the executor thread
+            future.set_exception(err)
+    threading.Thread(target=work, name='probdis_plan', daemon=True).start()
+    return future
 
 
 def main(args: list[str] | None = None) -> int:

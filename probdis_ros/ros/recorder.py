@@ -18,42 +18,91 @@ Recording runs as rosbag2 bags (MCAP, metadata version 9) with the rosbags libra
 Messages are stored as the CDR bytes that arrived on the wire (raw subscriptions), which
 every rosbag2 reader accepts.  The writer is closed (metadata written) by :meth:`close`;
 the planner node closes it at the end of a run, on ~/stop and on SIGINT/SIGTERM.
+
+What is written reaches the file within ``FLUSH_INTERVAL`` (and at every :meth:`flush`, which
+the node calls on every command, failure and status change): the MCAP chunk in memory is
+closed and handed to the operating system, so a recorder killed with SIGKILL leaves a bag
+that ends at most that long before the kill (``probdis replay`` reads it up to there).
+
+A write that fails (a full disk, a removed folder) never raises: the recording stops, the
+file is closed as far as it can be, and :attr:`error` says why.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
+import time
 
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import get_typestore, Stores
 
+#: Longest time a written message stays in memory before it reaches the file [s].
+FLUSH_INTERVAL = 0.5
+
 
 class BagRecorder:
-    """One bag: add topics, write raw messages, close."""
+    """One bag: add topics, write raw messages, flush, close; failures end up in error."""
 
-    def __init__(self, path: str | Path) -> None:
+    def __init__(self, path: str | Path, flush_interval: float = FLUSH_INTERVAL) -> None:
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self.typestore = get_typestore(Stores.ROS2_JAZZY)
-        self.writer = Writer(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
+        self.writer: Writer | None = Writer(self.path, version=9,
+                                            storage_plugin=StoragePlugin.MCAP)
         self.writer.open()
         self.connections = {}
         self.count = 0
+        self.error = ''
+        self.flush_interval = flush_interval
+        self.flushed_at = time.monotonic()
 
     def add_topic(self, topic: str, msgtype: str) -> None:
         """Declare a topic and its type (e.g. 'sensor_msgs/msg/JointState')."""
-        if topic not in self.connections:
-            self.connections[topic] = self.writer.add_connection(topic, msgtype,
-                                                                 typestore=self.typestore)
+        if topic not in self.connections and self.writer is not None:
+            self._guard(lambda: self.connections.__setitem__(topic, self.writer.add_connection(
+                topic, msgtype, typestore=self.typestore)))
 
     def write(self, topic: str, stamp_ns: int, data: bytes) -> None:
         """Store one serialized message of a declared topic."""
-        if self.writer is not None:
-            self.writer.write(self.connections[topic], stamp_ns, data)
-            self.count += 1
+        if self.writer is not None and topic in self.connections:
+            if self._guard(lambda: self.writer.write(self.connections[topic], stamp_ns, data)):
+                self.count += 1
+                if time.monotonic() - self.flushed_at >= self.flush_interval:
+                    self.flush()
+
+    def flush(self) -> None:
+        """Hand everything written so far to the operating system (closes the MCAP chunk)."""
+        self.flushed_at = time.monotonic()
+        storage = getattr(self.writer, 'storage', None)
+        chunk = getattr(storage, 'chunk', None)
+        if storage is None or chunk is None:
+            return
+
+        def flush() -> None:
+            if chunk.msgs:
+                storage.close_chunk()
+            storage.bio.flush()
+        self._guard(flush)
 
     def close(self) -> None:
-        """Write the metadata and close the bag (idempotent)."""
+        """Write the metadata and close the bag (idempotent; a failure lands in error)."""
         if self.writer is not None:
+            writer = self.writer
+            if self._guard(writer.close):
+                self.writer = None
+
+    def _guard(self, action) -> bool:
+        """Run a write; on failure stop recording, keep the reason, and return False."""
+        try:
+            action()
+            return True
+        except Exception as err:       # OSError (ENOSPC), rosbags' WriterError, ...
+            if not self.error:
+                self.error = f'recording to {self.path} failed: {err}'
             writer, self.writer = self.writer, None
-            writer.close()
+            if writer is not None:
+                try:
+                    writer.abort()
+                except Exception:      # the file may refuse even its close
+                    pass
+            return False

@@ -37,6 +37,7 @@ import numpy as np
 from probdis_ros.model import FailureMap, iiwa_arm
 from probdis_ros.motion.detector import BlockDetector, DetectorSettings, Verdict
 from probdis_ros.motion.jtc import JtcTrajectory
+from probdis_ros.motion.state_check import values_by_name
 from probdis_ros.planning.disentangle import failure_from_block
 from probdis_ros.ros.bag_source import Bag, BagError
 from probdis_ros.ros.messages import (
@@ -222,7 +223,8 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
         if detector is None:
             result.gaps.append(0.0)
             continue
-        verdict = detector.update(t, q)
+        # the measured torques, where the driver sends them (the torque ceiling's estimate)
+        verdict = detector.update(t, q, values_by_name(msg.name, msg.effort, names))
         result.gaps.append(detector.gap)
         if verdict is Verdict.DONE:
             if kind == 'path':

@@ -1,0 +1,543 @@
+# Copyright 2026 probdis_ros contributors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Compiled edge costs (numba): the failure probability along straight joint-space edges.
+
+An edge is the straight joint-space segment from a to b, cut into n = ceil(L / delta) equal
+steps; the failure probability is evaluated at the end of each step.  Along the segment the
+joint angles (and, for the planar arm, their running sums) change linearly, so their cosines
+and sines are advanced by angle addition instead of being recomputed.  Points are handled in
+chunks: poses of a chunk, then their probabilities, then the running cost, so that an edge
+that can no longer win stops early.  (Numba function calls with array arguments cost more
+than the arithmetic of one point, so no function is called per point.)
+
+Arm parameters as in :mod:`probdis_ros.model.kinematics`.  Failure parameters: points
+(F, 3), unit directions (F, 3) (z = 0 in 2-D), rotations (F, 3, 3) of the failure
+orientations, c_fail, and use_orient.
+"""
+
+import numba
+import numpy as np
+from probdis_ros.model.fast_math import arccos, rotation_angle
+from probdis_ros.model.kinematics import (
+    AXIS_CHAIN,
+    axis_chain_pose,
+    chain_pose,
+    is_identity,
+    PLANAR,
+)
+
+#: [m] a pose this near a failure point is at it (where an edge may start: _start_probability)
+AT_FAILURE = 1e-6
+CHUNK = 16
+
+
+@numba.njit(cache=True, nogil=True)
+def _chunk_poses(cs, sn, cd, sd, b, k0, count, n, kind, joint_params, offsets, bases,
+                 tip_offset, tip_rotation, pos, rot):
+    """
+    Advance the joint cosines/sines count steps; write the poses of points k0+1...
+
+    The last point of the edge (k = n) is recomputed from b so that it lands exactly there.
+    """
+    n_joints = cs.shape[0]
+    plain_tip = is_identity(tip_rotation)
+    for i in range(count):
+        k = k0 + i + 1
+        for j in range(n_joints):
+            c_new = cs[j] * cd[j] - sn[j] * sd[j]
+            sn[j] = sn[j] * cd[j] + cs[j] * sd[j]
+            cs[j] = c_new
+        if k == n:
+            angle = 0.0
+            for j in range(n_joints):
+                angle = angle + b[j] if kind == PLANAR else b[j]
+                cs[j] = np.cos(angle)
+                sn[j] = np.sin(angle)
+        if kind == PLANAR:
+            px = 0.0
+            py = 0.0
+            for j in range(n_joints):
+                px += joint_params[j] * cs[j]
+                py += joint_params[j] * sn[j]
+            pos[i, 0] = px
+            pos[i, 1] = py
+            pos[i, 2] = 0.0
+            continue
+        if kind == AXIS_CHAIN:
+            axis_chain_pose(cs, sn, joint_params, offsets, tip_offset, tip_rotation, pos, rot,
+                            i, plain_tip)
+            continue
+        chain_pose(cs, sn, offsets, bases, tip_offset, tip_rotation, pos, rot, i)
+
+
+#: From this many failures on, a chunk skips the failures that cannot raise its maximum.
+SKIP_FROM = 4
+
+
+@numba.njit(cache=True, nogil=True, error_model='numpy')
+def _chunk_probabilities(pos, rot, count, f_points, f_dirs, f_rots, c_fail, use_orient, prune,
+                         soa, p_out, near2=0.0, at_failure=-1.0):
+    """
+    Write max over failures of P_COORD * (1 - 0.5 D_ORIENT) for each pose of the chunk.
+
+    Each evaluated (failure, point) pair is exact, in an inner loop over the chunk's points
+    that the compiler vectorises: the poses are first copied to one contiguous row per
+    coordinate (rows 0-11 of soa), the arccos is fast_math's, and the numpy error model drops the
+    division checks that would otherwise keep the loop scalar.  (Bounds per point cost more
+    in scalar square roots and divisions than the vector arithmetic they save.)
+
+    Exact pruning per chunk: an upper bound of each failure's probability over the chunk is
+    compared with the least maximum found so far among the chunk's points; a failure whose
+    bound does not exceed it cannot change any point's maximum and is skipped.  The bound
+    takes the chunk's bounding sphere (a point is at least ``D - radius`` from the failure,
+    its alpha at most the center's plus ``asin(radius / D)``) and the spread of its
+    rotations about the middle pose (the angle to the failure's orientation is at least
+    the middle pose's minus the spread), with margins above the kernel's rounding; the
+    bounds of all failures are computed in one vectorised loop (with cheap upper bounds of
+    asin and of the rotation angle, ``ASIN_CUBE``).  The failure of the highest bound goes
+    first, then the others still above the least maximum, highest first when they are few,
+    so that the maximum rises early.  The result is the same number, bit for bit, as
+    evaluating every failure: a maximum does not depend on the order, nor on values that
+    do not win (``prune`` False evaluates them all, for the checks).  ``soa`` is the
+    :func:`workspace` of the map.
+    """
+    for i in range(count):
+        p_out[i] = 0.0
+        for k in range(3):
+            soa[k, i] = pos[i, k]
+        for k in range(9):
+            soa[3 + k, i] = rot[i, k // 3, k % 3]
+    n_fail = f_points.shape[0]
+    if not prune or n_fail < SKIP_FROM or count < 2:
+        for f in range(n_fail):
+            _failure_into(f, count, soa, f_points, f_dirs, f_rots, c_fail, use_orient,
+                          p_out, near2, at_failure)
+        return
+    # the chunk's bounding sphere (center: mean point) and, about its middle pose's
+    # rotation, the largest rotation angle of its poses
+    cx = cy = cz = 0.0
+    for i in range(count):
+        cx += soa[0, i]
+        cy += soa[1, i]
+        cz += soa[2, i]
+    cx /= count
+    cy /= count
+    cz /= count
+    r2 = 0.0
+    mid = count // 2
+    spread = 0.0
+    for i in range(count):
+        r2 = max(r2, (soa[0, i] - cx) ** 2 + (soa[1, i] - cy) ** 2 + (soa[2, i] - cz) ** 2)
+    if use_orient:
+        # the angle falls as the trace rises: the largest angle is the least trace's (to
+        # rounding, far below ANGLE_MARGIN), one arccos instead of one per pose
+        least_trace = np.inf
+        for i in range(count):
+            trace = 0.0
+            for k in range(9):
+                trace += soa[3 + k, mid] * soa[3 + k, i]
+            least_trace = min(least_trace, trace)
+        spread = rotation_angle(least_trace)
+    radius = np.sqrt(r2) * (1.0 + 1e-12) + 1e-12 + np.sqrt(near2)
+    # every failure's bound, in one loop without branches that the compiler vectorises
+    # (the failure arrays are column-major: EdgeCoster); rows 12 and 13 of the workspace
+    # hold the bounds and the order of the failures left (workspace)
+    bounds = soa[12]
+    order = soa[13]
+    m00, m01, m02 = soa[3, mid], soa[4, mid], soa[5, mid]
+    m10, m11, m12 = soa[6, mid], soa[7, mid], soa[8, mid]
+    m20, m21, m22 = soa[9, mid], soa[10, mid], soa[11, mid]
+    for f in range(n_fail):
+        dx = f_points[f, 0] - cx
+        dy = f_points[f, 1] - cy
+        dz = f_points[f, 2] - cz
+        dist = np.sqrt(dx * dx + dy * dy + dz * dz)
+        inverse = 1.0 / max(dist, 1e-300)
+        gap = max(0.0, dist - radius)
+        # alpha <= the center's + asin(x), x = radius / dist, and asin(x) <= x + (pi/2 - 1)
+        # x^3 on [0, 1] ((asin(x) - x) / x^3 rises to pi/2 - 1 at 1)
+        cos_c = (f_dirs[f, 0] * dx + f_dirs[f, 1] * dy + f_dirs[f, 2] * dz) * inverse
+        x = min(1.0, radius * inverse)
+        alpha = (arccos(min(1.0, max(-1.0, cos_c))) + x + ASIN_CUBE * x * x * x
+                 + ANGLE_MARGIN)
+        ratio = min(1.0, alpha * INV_PI)
+        ratio = 1.0 if dist <= radius else ratio * ratio * ratio
+        factor = 1.0
+        if use_orient:
+            trace = (f_rots[f, 0, 0] * m00 + f_rots[f, 0, 1] * m01 + f_rots[f, 0, 2] * m02
+                     + f_rots[f, 1, 0] * m10 + f_rots[f, 1, 1] * m11 + f_rots[f, 1, 2] * m12
+                     + f_rots[f, 2, 0] * m20 + f_rots[f, 2, 1] * m21 + f_rots[f, 2, 2] * m22)
+            # the angle from trace = 1 + 2 cos(angle): one arccos, within ~5e-8 rad of the
+            # kernel's half-angle form (below ANGLE_MARGIN)
+            angle = arccos(min(1.0, max(-1.0, (trace - 1.0) * 0.5)))
+            factor = 1.0 - 0.5 * max(0.0, angle - spread - ANGLE_MARGIN) * INV_PI
+        bounds[f] = (1.0 + 1e-9) * ratio * factor / (1.0 + c_fail * gap * gap)
+    first = 0
+    for f in range(n_fail):
+        if bounds[f] > bounds[first]:
+            first = f
+    _failure_into(first, count, soa, f_points, f_dirs, f_rots, c_fail, use_orient, p_out,
+                  near2, at_failure)
+    least = _least(p_out, count)
+    # the failures still above it: few are sorted, highest bound first, so that the least
+    # maximum rises as fast as it can and the rest fall below it sooner; many stay in order
+    n_left = 0
+    for f in range(n_fail):
+        bound = bounds[f]
+        if f == first or bound <= least:
+            continue
+        slot = n_left
+        if n_left < SORT_UP_TO:
+            while slot > 0 and bounds[int(order[slot - 1])] < bound:
+                order[slot] = order[slot - 1]
+                slot -= 1
+        order[slot] = f
+        n_left += 1
+    for slot in range(n_left):
+        f = int(order[slot])
+        bound = bounds[f]
+        if bound <= least:
+            if n_left <= SORT_UP_TO:
+                break
+            continue
+        _failure_into(f, count, soa, f_points, f_dirs, f_rots, c_fail, use_orient,
+                      p_out, near2, at_failure)
+        least = _least(p_out, count)
+
+
+#: [rad] added to angles in bounds: above the rounding of arccos near +-1 (~3e-8)
+ANGLE_MARGIN = 1e-6
+#: pi/2 - 1, rounded up: asin(x) <= x + ASIN_CUBE x^3 on [0, 1]
+ASIN_CUBE = 0.5707963267948967
+#: 1 / pi, rounded up (bounds multiply by it)
+INV_PI = (1.0 + 1e-15) / np.pi
+#: Up to this many failures left after the first are evaluated highest bound first.
+SORT_UP_TO = 24
+
+
+@numba.njit(cache=True, nogil=True)
+def workspace(n_fail):
+    """
+    Return the scratch rows of :func:`_chunk_probabilities` for a map of n_fail failures.
+
+    Rows 0-11: a chunk's poses, one row per coordinate; rows 12 and 13: the failures'
+    bounds and their order; row 14: one failure's P_COORD at the chunk's points.
+    """
+    return np.empty((15, max(CHUNK, n_fail)))
+
+
+@numba.njit(cache=True, inline='always')
+def _least(p_out, count):
+    """Return the least value of the chunk's maxima (pairwise: a short chain of minima)."""
+    if count != CHUNK:
+        least = p_out[0]
+        for i in range(1, count):
+            least = min(least, p_out[i])
+        return least
+    a0 = min(min(p_out[0], p_out[1]), min(p_out[2], p_out[3]))
+    a1 = min(min(p_out[4], p_out[5]), min(p_out[6], p_out[7]))
+    a2 = min(min(p_out[8], p_out[9]), min(p_out[10], p_out[11]))
+    a3 = min(min(p_out[12], p_out[13]), min(p_out[14], p_out[15]))
+    return min(min(a0, a1), min(a2, a3))
+
+
+@numba.njit(cache=True, error_model='numpy', inline='always')
+def _coord_probability(dx, dy, dz, ux, uy, uz, c_fail, near2, at_failure):
+    """Return P_COORD of one failure at offset (dx, dy, dz) from it to the point."""
+    d2 = dx * dx + dy * dy + dz * dz
+    c = (ux * dx + uy * dy + uz * dz) / np.sqrt(d2) if d2 > near2 else at_failure
+    ratio = arccos(min(1.0, max(-1.0, c))) / np.pi
+    return ratio * ratio * ratio / (1.0 + c_fail * d2)
+
+
+@numba.njit(cache=True, error_model='numpy', inline='always')
+def _failure_into(f, count, soa, f_points, f_dirs, f_rots, c_fail, use_orient, p_out, near2,
+                  at_failure):
+    """
+    Raise each point's maximum in p_out to failure f's probability there.
+
+    With orientation, in two passes: P_COORD first (kept in row 14 of the workspace); only
+    if it exceeds some point's maximum is the orientation factor (at most 1) computed, for
+    the whole chunk.  Most failures that pass the chunk's bound lose already on P_COORD,
+    and the factor is three of the eight square roots and divisions per point.  The
+    numbers are those of one pass: the same operations on the same values.
+    """
+    px, py, pz = soa[0], soa[1], soa[2]
+    coord = soa[14]
+    fx, fy, fz = f_points[f, 0], f_points[f, 1], f_points[f, 2]
+    ux, uy, uz = f_dirs[f, 0], f_dirs[f, 1], f_dirs[f, 2]
+    higher = 0
+    # (at the failure itself, d2 <= near2, cos alpha is at_failure: -1 (alpha = pi, ratio 1)
+    # as in the paper, +1 (behind it) for where a Hard edge starts)
+    if not use_orient:
+        for i in range(count):
+            p = _coord_probability(fx - px[i], fy - py[i], fz - pz[i], ux, uy, uz, c_fail,
+                                   near2, at_failure)
+            p_out[i] = max(p_out[i], p)
+        return
+    for i in range(count):
+        p = _coord_probability(fx - px[i], fy - py[i], fz - pz[i], ux, uy, uz, c_fail, near2,
+                               at_failure)
+        coord[i] = p
+        higher += 1 if p > p_out[i] else 0
+    if higher == 0:
+        return
+    # orientation: 1 - 0.5 D_ORIENT from trace(G^T R)
+    r00, r01, r02, r10, r11, r12 = soa[3], soa[4], soa[5], soa[6], soa[7], soa[8]
+    r20, r21, r22 = soa[9], soa[10], soa[11]
+    g = f_rots[f]
+    g00, g01, g02, g10, g11, g12 = g[0, 0], g[0, 1], g[0, 2], g[1, 0], g[1, 1], g[1, 2]
+    g20, g21, g22 = g[2, 0], g[2, 1], g[2, 2]
+    for i in range(count):
+        trace = (g00 * r00[i] + g01 * r01[i] + g02 * r02[i] + g10 * r10[i] + g11 * r11[i]
+                 + g12 * r12[i] + g20 * r20[i] + g21 * r21[i] + g22 * r22[i])
+        half_cos = np.sqrt(min(1.0, max(0.0, (trace + 1.0) * 0.25)))
+        factor = 1.0 - arccos(half_cos) / np.pi
+        p_out[i] = max(p_out[i], coord[i] * factor)
+
+
+@numba.njit(cache=True, inline='always')
+def _chunk_log_survival(p_buf, count, p_max):
+    """Return (sum log(1 - min(p, p_max)), max p) over the chunk, with one logarithm."""
+    survival = 1.0
+    highest = 0.0
+    for i in range(count):
+        survival *= 1.0 - min(p_buf[i], p_max)
+        highest = max(highest, p_buf[i])
+    return np.log(survival), highest
+
+
+@numba.njit(cache=True, inline='always')
+def _descend(p_buf, count, cap, level):
+    """
+    Return the level after the chunk's points, or -1 if a point is forbidden.
+
+    The rule of a cap (the Hard baseline's Y): a point above the cap is forbidden, except
+    while the edge is leaving a region above the cap that it started in, its probability
+    never rising on the way out (``level`` is the highest probability still allowed).
+    """
+    for i in range(count):
+        if p_buf[i] > level:
+            return -1.0
+        level = max(cap, p_buf[i])
+    return level
+
+
+@numba.njit(cache=True, nogil=True)
+def _start_probability(cs, sn, n, kind, joint_params, offsets, bases, tip_offset,
+                       tip_rotation, f_points, f_dirs, f_rots, c_fail, use_orient, prune, pos, rot,
+                       soa, p_buf):
+    """
+    Return the failure probability at the start of an edge (its cosines and sines).
+
+    A start within AT_FAILURE of a failure point counts as behind it (probability 0 from
+    that failure): an arm held where it was blocked is where it came from, and it may leave
+    backwards but not go on.  (At the point itself the direction is undefined; the paper's
+    alpha = pi would let a Hard edge run on through the obstacle, its probability falling.)
+    """
+    n_joints = cs.shape[0]
+    _chunk_poses(cs.copy(), sn.copy(), np.ones(n_joints), np.zeros(n_joints), cs, -1, 1, n,
+                 kind, joint_params, offsets, bases, tip_offset, tip_rotation, pos, rot)
+    _chunk_probabilities(pos, rot, 1, f_points, f_dirs, f_rots, c_fail, use_orient, prune, soa,
+                         p_buf, AT_FAILURE ** 2, 1.0)
+    return p_buf[0]
+
+
+@numba.njit(cache=True, nogil=True)
+def edge_cost_kernel(a, b, limit, delta, length_weight, risk_weight, cap, p_max, kind,
+                     joint_params, offsets, bases, tip_offset, tip_rotation,
+                     f_points, f_dirs, f_rots, c_fail, use_orient, prune, pos, rot, soa, p_buf):
+    """
+    Return the cost of edge a -> b, or inf once it reaches limit (it only grows on the way).
+
+    ``length_weight L - risk_weight sum (s/delta) log(1 - p)``, inf if a p > cap is not on the
+    way out of a region above the cap that the edge started in (:func:`_descend`; the
+    objective's terms, :class:`probdis_ros.model.path_cost.EdgeTerms`).  pos, rot, soa and
+    p_buf are buffers for CHUNK points.
+    """
+    n_joints = a.shape[0]
+    length = 0.0
+    for j in range(n_joints):
+        length += (b[j] - a[j]) ** 2
+    length = np.sqrt(length)
+    if length == 0.0:
+        return 0.0
+    n = max(1, int(np.ceil(length / delta - 1e-12)))
+    cost = length_weight * length
+    if cost >= limit:
+        return np.inf
+    if f_points.shape[0] == 0:
+        return cost
+    weight = risk_weight * (length / n) / delta
+    cs = np.empty(n_joints)
+    sn = np.empty(n_joints)
+    cd = np.empty(n_joints)
+    sd = np.empty(n_joints)
+    run0 = 0.0
+    run1 = 0.0
+    for j in range(n_joints):
+        run0 += a[j]
+        run1 += b[j] - a[j]
+        angle = run0 if kind == PLANAR else a[j]
+        step = (run1 if kind == PLANAR else b[j] - a[j]) / n
+        cs[j] = np.cos(angle)
+        sn[j] = np.sin(angle)
+        cd[j] = np.cos(step)
+        sd[j] = np.sin(step)
+    level = cap
+    if cap < np.inf:
+        level = max(cap, _start_probability(cs, sn, n, kind, joint_params, offsets, bases,
+                                            tip_offset, tip_rotation, f_points, f_dirs,
+                                            f_rots, c_fail, use_orient, prune, pos, rot, soa,
+                                            p_buf))
+    for k0 in range(0, n, CHUNK):
+        count = min(CHUNK, n - k0)
+        _chunk_poses(cs, sn, cd, sd, b, k0, count, n, kind, joint_params, offsets, bases,
+                     tip_offset, tip_rotation, pos, rot)
+        _chunk_probabilities(pos, rot, count, f_points, f_dirs, f_rots, c_fail, use_orient, prune,
+                             soa, p_buf)
+        log_survival, highest = _chunk_log_survival(p_buf, count, p_max)
+        if highest > cap:
+            level = _descend(p_buf, count, cap, level)
+            if level < 0.0:
+                return np.inf
+        else:
+            level = cap
+        cost -= weight * log_survival
+        if cost >= limit:
+            return np.inf
+    return cost
+
+
+@numba.njit(cache=True, nogil=True)
+def edge_costs_kernel(sources, target, base, limits, toward, delta, length_weight,
+                      risk_weight, cap, p_max, kind, joint_params, offsets, bases, tip_offset,
+                      tip_rotation, f_points, f_dirs, f_rots, c_fail, use_orient, prune, out):
+    """
+    Write ``base[i] + cost(sources[i] -> target)`` (``target -> sources[i]`` unless toward).
+
+    An edge whose cost reaches ``limits[i]`` is abandoned there and written as inf: exact
+    pruning for RRT* rewiring, which only needs edges cheaper than a neighbour's cost.
+    """
+    pos = np.empty((CHUNK, 3))
+    rot = np.empty((CHUNK, 3, 3))
+    soa = workspace(f_points.shape[0])
+    p_buf = np.empty(CHUNK)
+    for i in range(sources.shape[0]):
+        a = sources[i] if toward else target
+        b = target if toward else sources[i]
+        out[i] = base[i] + edge_cost_kernel(a, b, limits[i], delta, length_weight,
+                                            risk_weight, cap, p_max, kind, joint_params,
+                                            offsets, bases, tip_offset, tip_rotation,
+                                            f_points, f_dirs, f_rots, c_fail, use_orient,
+                                            prune, pos,
+                                            rot, soa, p_buf)
+
+
+@numba.njit(cache=True, nogil=True)
+def cheapest_edge_kernel(sources, target, base, toward, delta, length_weight, risk_weight,
+                         cap, p_max, kind, joint_params, offsets, bases, tip_offset,
+                         tip_rotation, f_points, f_dirs, f_rots, c_fail, use_orient, prune):
+    """
+    Return (i, total) minimising ``base[i] + cost(edge i)``; (-1, inf) if none is finite.
+
+    Best-first: each edge's cost so far (plus its length term, known up front) is a lower
+    bound of its total, so the edge with the lowest bound is advanced by a chunk of points
+    until one edge is complete with a total no other bound undercuts.  The result is exactly
+    the argmin (ties to the lowest index) while most edges are never costed to the end.
+    Edges run sources[i] -> target if toward, else target -> sources[i].
+    """
+    m, n_joints = sources.shape
+    bound = np.empty(m)           # lower bound of the total (exact when done)
+    level = np.full(m, cap)       # highest point probability still allowed (see _descend)
+    done = np.zeros(m, dtype=np.bool_)
+    steps = np.zeros(m, dtype=np.int64)
+    k_done = np.zeros(m, dtype=np.int64)
+    weight = np.zeros(m)
+    cs = np.empty((m, n_joints))
+    sn = np.empty((m, n_joints))
+    cd = np.empty((m, n_joints))
+    sd = np.empty((m, n_joints))
+    ends = np.empty((m, n_joints))
+    for i in range(m):
+        a = sources[i] if toward else target
+        b = target if toward else sources[i]
+        length = 0.0
+        for j in range(n_joints):
+            length += (b[j] - a[j]) ** 2
+        length = np.sqrt(length)
+        bound[i] = base[i] + length_weight * length
+        if length == 0.0 or f_points.shape[0] == 0:
+            done[i] = True
+            continue
+        n = max(1, int(np.ceil(length / delta - 1e-12)))
+        steps[i] = n
+        weight[i] = risk_weight * (length / n) / delta
+        run0 = 0.0
+        run1 = 0.0
+        for j in range(n_joints):
+            run0 += a[j]
+            run1 += b[j] - a[j]
+            angle = run0 if kind == PLANAR else a[j]
+            step = (run1 if kind == PLANAR else b[j] - a[j]) / n
+            cs[i, j] = np.cos(angle)
+            sn[i, j] = np.sin(angle)
+            cd[i, j] = np.cos(step)
+            sd[i, j] = np.sin(step)
+            ends[i, j] = b[j]
+    pos = np.empty((CHUNK, 3))
+    rot = np.empty((CHUNK, 3, 3))
+    soa = workspace(f_points.shape[0])
+    p_buf = np.empty(CHUNK)
+    if cap < np.inf:
+        for i in range(m):
+            if not done[i]:
+                level[i] = max(cap, _start_probability(
+                    cs[i], sn[i], steps[i], kind, joint_params, offsets, bases, tip_offset,
+                    tip_rotation, f_points, f_dirs, f_rots, c_fail, use_orient, prune, pos, rot,
+                    soa,
+                    p_buf))
+    while True:
+        pick = -1
+        for i in range(m):   # lowest bound first; on equal bounds a finished edge, then index
+            if not np.isfinite(bound[i]):
+                continue
+            tie_done = bound[i] == bound[pick] and done[i] and not done[pick] if pick >= 0 \
+                else False
+            if pick < 0 or bound[i] < bound[pick] or tie_done:
+                pick = i
+        if pick < 0:
+            return -1, np.inf
+        if done[pick]:
+            return pick, bound[pick]
+        i = pick
+        count = min(CHUNK, steps[i] - k_done[i])
+        _chunk_poses(cs[i], sn[i], cd[i], sd[i], ends[i], k_done[i], count, steps[i], kind,
+                     joint_params, offsets, bases, tip_offset, tip_rotation, pos, rot)
+        _chunk_probabilities(pos, rot, count, f_points, f_dirs, f_rots, c_fail, use_orient, prune,
+                             soa, p_buf)
+        k_done[i] += count
+        log_survival, highest = _chunk_log_survival(p_buf, count, p_max)
+        if highest > cap:
+            level[i] = _descend(p_buf, count, cap, level[i])
+        else:
+            level[i] = cap
+        if level[i] < 0.0:
+            bound[i] = np.inf
+        else:
+            bound[i] -= weight[i] * log_survival
+        if k_done[i] == steps[i]:
+            done[i] = True

@@ -1,0 +1,274 @@
+# Copyright 2026 probdis_ros contributors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Forward kinematics of revolute chains, compiled (numba): batches and single poses.
+
+Arm parameters as the kernels take them (``kind, joint_params, offsets, bases, tip_offset,
+tip_rotation``, :meth:`probdis_ros.model.arms.Arm.kernel_params`):
+
+* PLANAR: the planar chain; joint_params are the link lengths.
+* CHAIN: any revolute chain; joint j moves its child frame by ``offsets[j]`` in the parent
+  frame and rotates it by ``bases[j, 0] + cos(q_j) bases[j, 1] + sin(q_j) bases[j, 2]``.
+* AXIS_CHAIN: a revolute chain whose joint frames are parallel at zero and whose axes are
+  coordinate axes (the iiwa URDF): joint_params are signed axis codes (+-1 x, +-2 y, +-3 z),
+  so that a joint only mixes two columns of the rotation (about 4x less arithmetic).
+"""
+
+import numba
+import numpy as np
+
+PLANAR = 0
+CHAIN = 1
+AXIS_CHAIN = 2
+
+
+@numba.njit(cache=True, nogil=True)
+def chain_kernel(q: np.ndarray, kind: int, codes: np.ndarray, offsets: np.ndarray,
+                 bases: np.ndarray, tip_offset: np.ndarray, tip_rotation: np.ndarray,
+                 pos_out: np.ndarray, rot_out: np.ndarray) -> None:
+    """
+    Forward kinematics of a revolute chain (CHAIN or AXIS_CHAIN, below) for every row of q.
+
+    Joint j moves its child frame by ``offsets[j]`` in the parent frame and rotates it by
+    ``bases[j, 0] + cos(q_j) bases[j, 1] + sin(q_j) bases[j, 2]`` (each 3x3); an AXIS_CHAIN
+    turns about the coordinate axis ``codes[j]`` instead, with a quarter of the arithmetic.
+    """
+    cs = np.empty(q.shape[1])
+    sn = np.empty(q.shape[1])
+    plain_tip = is_identity(tip_rotation)
+    for k in range(q.shape[0]):
+        for j in range(q.shape[1]):
+            cs[j] = np.cos(q[k, j])
+            sn[j] = np.sin(q[k, j])
+        if kind == AXIS_CHAIN:
+            axis_chain_pose(cs, sn, codes, offsets, tip_offset, tip_rotation, pos_out,
+                            rot_out, k, plain_tip)
+        else:
+            chain_pose(cs, sn, offsets, bases, tip_offset, tip_rotation, pos_out, rot_out, k)
+
+
+@numba.njit(cache=True, nogil=True)
+def quaternion_kernel(rot: np.ndarray, quat_out: np.ndarray) -> None:
+    """
+    Write unit quaternions ``(w, x, y, z)``, ``w >= 0``, of rotation matrices ``(N, 3, 3)``.
+
+    Shepperd's method: the largest of 4w^2, 4x^2, 4y^2, 4z^2 (from the trace and the
+    diagonal) is taken by a square root, and the other three components from the
+    off-diagonal sums and differences divided by it.  Signs then follow the matrix exactly;
+    taking every magnitude from the diagonal instead loses the signs near half-turns, where
+    the off-diagonal differences that would carry them are rounding noise.
+    """
+    for k in range(rot.shape[0]):
+        r = rot[k]
+        trace = r[0, 0] + r[1, 1] + r[2, 2]
+        if trace >= r[0, 0] and trace >= r[1, 1] and trace >= r[2, 2]:
+            s = 2.0 * np.sqrt(max(0.0, 1.0 + trace))          # 4w
+            w = 0.25 * s
+            x = (r[2, 1] - r[1, 2]) / s
+            y = (r[0, 2] - r[2, 0]) / s
+            z = (r[1, 0] - r[0, 1]) / s
+        elif r[0, 0] >= r[1, 1] and r[0, 0] >= r[2, 2]:
+            s = 2.0 * np.sqrt(max(0.0, 1.0 + 2.0 * r[0, 0] - trace))   # 4x
+            w = (r[2, 1] - r[1, 2]) / s
+            x = 0.25 * s
+            y = (r[0, 1] + r[1, 0]) / s
+            z = (r[0, 2] + r[2, 0]) / s
+        elif r[1, 1] >= r[2, 2]:
+            s = 2.0 * np.sqrt(max(0.0, 1.0 + 2.0 * r[1, 1] - trace))   # 4y
+            w = (r[0, 2] - r[2, 0]) / s
+            x = (r[0, 1] + r[1, 0]) / s
+            y = 0.25 * s
+            z = (r[1, 2] + r[2, 1]) / s
+        else:
+            s = 2.0 * np.sqrt(max(0.0, 1.0 + 2.0 * r[2, 2] - trace))   # 4z
+            w = (r[1, 0] - r[0, 1]) / s
+            x = (r[0, 2] + r[2, 0]) / s
+            y = (r[1, 2] + r[2, 1]) / s
+            z = 0.25 * s
+        norm = np.sqrt(w * w + x * x + y * y + z * z)
+        if w < 0.0:
+            norm = -norm
+        quat_out[k, 0] = w / norm
+        quat_out[k, 1] = x / norm
+        quat_out[k, 2] = y / norm
+        quat_out[k, 3] = z / norm
+
+
+@numba.njit(cache=True, inline='always')
+def chain_pose(cs, sn, offsets, bases, tip_offset, tip_rotation, pos, rot, i):
+    """Write pose i of a CHAIN arm from its joint cosines and sines."""
+    px = py = pz = 0.0
+    r00, r01, r02 = 1.0, 0.0, 0.0
+    r10, r11, r12 = 0.0, 1.0, 0.0
+    r20, r21, r22 = 0.0, 0.0, 1.0
+    for j in range(offsets.shape[0]):
+        ox, oy, oz = offsets[j, 0], offsets[j, 1], offsets[j, 2]
+        px += r00 * ox + r01 * oy + r02 * oz
+        py += r10 * ox + r11 * oy + r12 * oz
+        pz += r20 * ox + r21 * oy + r22 * oz
+        c = cs[j]
+        s = sn[j]
+        m00 = bases[j, 0, 0, 0] + c * bases[j, 1, 0, 0] + s * bases[j, 2, 0, 0]
+        m01 = bases[j, 0, 0, 1] + c * bases[j, 1, 0, 1] + s * bases[j, 2, 0, 1]
+        m02 = bases[j, 0, 0, 2] + c * bases[j, 1, 0, 2] + s * bases[j, 2, 0, 2]
+        m10 = bases[j, 0, 1, 0] + c * bases[j, 1, 1, 0] + s * bases[j, 2, 1, 0]
+        m11 = bases[j, 0, 1, 1] + c * bases[j, 1, 1, 1] + s * bases[j, 2, 1, 1]
+        m12 = bases[j, 0, 1, 2] + c * bases[j, 1, 1, 2] + s * bases[j, 2, 1, 2]
+        m20 = bases[j, 0, 2, 0] + c * bases[j, 1, 2, 0] + s * bases[j, 2, 2, 0]
+        m21 = bases[j, 0, 2, 1] + c * bases[j, 1, 2, 1] + s * bases[j, 2, 2, 1]
+        m22 = bases[j, 0, 2, 2] + c * bases[j, 1, 2, 2] + s * bases[j, 2, 2, 2]
+        r00, r01, r02 = (r00 * m00 + r01 * m10 + r02 * m20,
+                         r00 * m01 + r01 * m11 + r02 * m21,
+                         r00 * m02 + r01 * m12 + r02 * m22)
+        r10, r11, r12 = (r10 * m00 + r11 * m10 + r12 * m20,
+                         r10 * m01 + r11 * m11 + r12 * m21,
+                         r10 * m02 + r11 * m12 + r12 * m22)
+        r20, r21, r22 = (r20 * m00 + r21 * m10 + r22 * m20,
+                         r20 * m01 + r21 * m11 + r22 * m21,
+                         r20 * m02 + r21 * m12 + r22 * m22)
+    tip_pose(px, py, pz, r00, r01, r02, r10, r11, r12, r20, r21, r22, tip_offset,
+             tip_rotation, pos, rot, i)
+
+
+@numba.njit(cache=True, inline='always')
+def axis_chain_pose(cs, sn, codes, offsets, tip_offset, tip_rotation, pos, rot, i,
+                    plain_tip=False, n_used=-1):
+    """
+    Write pose i of an AXIS_CHAIN arm from its joint cosines and sines.
+
+    Offsets along z alone (the iiwa's) take a third of the arithmetic, and ``plain_tip``
+    (an identity tip rotation, :func:`is_identity`) skips the tip rotation; the products they
+    skip are exact zeros, so the pose is the same to the bit (but for the sign of a zero).
+    ``rot`` None writes the position alone, and then only the first ``n_used`` joints are
+    turned (-1: all; :func:`position_joints` tells how many turns the position depends on).
+    """
+    px = py = pz = 0.0
+    r00, r01, r02 = 1.0, 0.0, 0.0
+    r10, r11, r12 = 0.0, 1.0, 0.0
+    r20, r21, r22 = 0.0, 0.0, 1.0
+    n_turned = offsets.shape[0] if n_used < 0 else n_used
+    for j in range(offsets.shape[0]):
+        ox, oy, oz = offsets[j, 0], offsets[j, 1], offsets[j, 2]
+        if ox == 0.0 and oy == 0.0:
+            px += r02 * oz
+            py += r12 * oz
+            pz += r22 * oz
+        else:
+            px += r00 * ox + r01 * oy + r02 * oz
+            py += r10 * ox + r11 * oy + r12 * oz
+            pz += r20 * ox + r21 * oy + r22 * oz
+        if j >= n_turned:
+            continue
+        code = codes[j]
+        c = cs[j]
+        s = sn[j] if code > 0 else -sn[j]
+        axis = abs(code)
+        if axis == 3.0:      # R <- R Rz: columns 0, 1
+            r00, r01 = r00 * c + r01 * s, r01 * c - r00 * s
+            r10, r11 = r10 * c + r11 * s, r11 * c - r10 * s
+            r20, r21 = r20 * c + r21 * s, r21 * c - r20 * s
+        elif axis == 2.0:    # R <- R Ry: columns 0, 2
+            r00, r02 = r00 * c - r02 * s, r02 * c + r00 * s
+            r10, r12 = r10 * c - r12 * s, r12 * c + r10 * s
+            r20, r22 = r20 * c - r22 * s, r22 * c + r20 * s
+        else:                # R <- R Rx: columns 1, 2
+            r01, r02 = r01 * c + r02 * s, r02 * c - r01 * s
+            r11, r12 = r11 * c + r12 * s, r12 * c - r11 * s
+            r21, r22 = r21 * c + r22 * s, r22 * c - r21 * s
+    ox, oy, oz = tip_offset[0], tip_offset[1], tip_offset[2]
+    if rot is None:
+        pos[i, 0] = px + r00 * ox + r01 * oy + r02 * oz
+        pos[i, 1] = py + r10 * ox + r11 * oy + r12 * oz
+        pos[i, 2] = pz + r20 * ox + r21 * oy + r22 * oz
+    elif plain_tip and ox == 0.0 and oy == 0.0:
+        pos[i, 0] = px + r02 * oz
+        pos[i, 1] = py + r12 * oz
+        pos[i, 2] = pz + r22 * oz
+        rot[i, 0, 0], rot[i, 0, 1], rot[i, 0, 2] = r00, r01, r02
+        rot[i, 1, 0], rot[i, 1, 1], rot[i, 1, 2] = r10, r11, r12
+        rot[i, 2, 0], rot[i, 2, 1], rot[i, 2, 2] = r20, r21, r22
+    else:
+        tip_pose(px, py, pz, r00, r01, r02, r10, r11, r12, r20, r21, r22, tip_offset,
+                 tip_rotation, pos, rot, i)
+
+
+@numba.njit(cache=True, nogil=True)
+def is_identity(rotation):
+    """Tell whether a 3x3 matrix is exactly the identity."""
+    for r in range(3):
+        for c in range(3):
+            if rotation[r, c] != (1.0 if r == c else 0.0):
+                return False
+    return True
+
+
+@numba.njit(cache=True, nogil=True)
+def position_joints(codes, tip_offset):
+    """
+    Return how many leading joints of an AXIS_CHAIN move its tip position.
+
+    All but the last when the tip offset lies on the last joint's axis (the iiwa's flange):
+    that joint turns the two columns of the rotation the offset has no part in.
+    """
+    n = codes.shape[0]
+    axis = int(abs(codes[n - 1])) - 1
+    for c in range(3):
+        if c != axis and tip_offset[c] != 0.0:
+            return n
+    return n - 1
+
+
+@numba.njit(cache=True, nogil=True)
+def positions_kernel(q, rows, kind, codes, offsets, bases, tip_offset, tip_rotation, pos_out):
+    """
+    Write the tip positions of the rows of q where ``rows`` is True (others are left alone).
+
+    The same numbers as :func:`chain_kernel`'s positions (but for the sign of a zero), with
+    less work: no rotation is written and an AXIS_CHAIN skips the joints the position does
+    not depend on (:func:`position_joints`) and their sines and cosines.
+    """
+    n_joints = q.shape[1]
+    cs = np.empty(n_joints)
+    sn = np.empty(n_joints)
+    pos = np.empty((1, 3))
+    rot = np.empty((1, 3, 3))
+    n_used = position_joints(codes, tip_offset) if kind == AXIS_CHAIN else n_joints
+    for k in range(q.shape[0]):
+        if not rows[k]:
+            continue
+        for j in range(n_used):
+            cs[j] = np.cos(q[k, j])
+            sn[j] = np.sin(q[k, j])
+        if kind == AXIS_CHAIN:
+            axis_chain_pose(cs, sn, codes, offsets, tip_offset, tip_rotation, pos_out, None, k,
+                            False, n_used)
+        else:
+            chain_pose(cs, sn, offsets, bases, tip_offset, tip_rotation, pos, rot, 0)
+            pos_out[k] = pos[0]
+
+
+@numba.njit(cache=True, inline='always')
+def tip_pose(px, py, pz, r00, r01, r02, r10, r11, r12, r20, r21, r22, tip_offset,
+             tip_rotation, pos, rot, i):
+    """Write pose i: the last joint frame (p, R) moved to the tip by the fixed tip transform."""
+    ox, oy, oz = tip_offset[0], tip_offset[1], tip_offset[2]
+    pos[i, 0] = px + r00 * ox + r01 * oy + r02 * oz
+    pos[i, 1] = py + r10 * ox + r11 * oy + r12 * oz
+    pos[i, 2] = pz + r20 * ox + r21 * oy + r22 * oz
+    for c in range(3):
+        t0, t1, t2 = tip_rotation[0, c], tip_rotation[1, c], tip_rotation[2, c]
+        rot[i, 0, c] = r00 * t0 + r01 * t1 + r02 * t2
+        rot[i, 1, c] = r10 * t0 + r11 * t1 + r12 * t2
+        rot[i, 2, c] = r20 * t0 + r21 * t1 + r22 * t2

@@ -1,0 +1,170 @@
+# Copyright 2026 probdis_ros contributors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Joint states checked against the arm before anything is built from them (no rclpy).
+
+A joint state is refused, with the reason, when it cannot be the arm's:
+
+* its shape: a missing joint, a name given twice, arrays of the wrong length, a NaN or inf;
+* a position outside the joint limits by more than ``LIMIT_TOLERANCE`` (within it, the
+  position is clamped to the limit: nothing outside the limits is ever built from a state);
+* time going backwards: a header stamp not later than the last accepted one (a stream that
+  repeats one message, a replayed recording), an unstamped state after stamped ones (a
+  second publisher), or the host's time base running back;
+* a jump: a joint moved further since the last accepted state than the arm can
+  (``JUMP_SPEED`` x its velocity limit, plus ``JUMP_SLACK`` for noise): an old configuration
+  repeated by a second publisher, or a mixed-up joint order.
+
+After ``SILENCE`` seconds without an accepted state the stream counts as new (a restarted
+driver): stamps and jumps are judged from its first state again.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+#: How far past a joint limit a measured position is still taken (clamped to it) [rad].
+LIMIT_TOLERANCE = 0.002
+#: A joint may move this many times its URDF velocity limit between two states ...
+JUMP_SPEED = 1.5
+#: ... plus this much (noise, rounding) [rad].
+JUMP_SLACK = 0.05
+#: Without an accepted state for this long, the next one starts a new stream [s].
+SILENCE = 1.0
+
+
+class BadJointStateError(ValueError):
+    """A joint state that cannot be used, with the reason."""
+
+
+def positions_by_name(names: Sequence[str], positions: Sequence[float],
+                      joint_names: Sequence[str]) -> np.ndarray:
+    """Return the positions of joint_names, matched by name; raise BadJointStateError."""
+    if len(positions) != len(names):
+        raise BadJointStateError(f'{len(names)} names but {len(positions)} positions')
+    index: dict[str, int] = {}
+    for i, name in enumerate(names):
+        if name in index:
+            raise BadJointStateError(f'joint {name} is named twice')
+        index[name] = i
+    missing = [name for name in joint_names if name not in index]
+    if missing:
+        raise BadJointStateError(f'missing joints {", ".join(missing)}')
+    q = np.array([positions[index[name]] for name in joint_names], dtype=float)
+    if not np.all(np.isfinite(q)):
+        raise BadJointStateError(f'non-finite positions {q.tolist()}')
+    return q
+
+
+def values_by_name(names: Sequence[str], values: Sequence[float],
+                   joint_names: Sequence[str]) -> np.ndarray | None:
+    """Return joint_names' velocities (or efforts), None where the state carries none usable."""
+    if len(values) != len(names) or len(set(names)) != len(names):
+        return None
+    index = {name: i for i, name in enumerate(names)}
+    v = np.array([values[index[name]] for name in joint_names], dtype=float)
+    return v if np.all(np.isfinite(v)) else None
+
+
+@dataclass
+class StateCheck:
+    """The gate every joint state passes: feed it each message in arrival order."""
+
+    joint_names: Sequence[str]
+    lower: np.ndarray
+    upper: np.ndarray
+    velocity_limits: np.ndarray
+    tolerance: float = LIMIT_TOLERANCE
+    silence: float = SILENCE
+
+    def __post_init__(self) -> None:
+        """Start with no stream heard."""
+        self.lower = np.asarray(self.lower, dtype=float)
+        self.upper = np.asarray(self.upper, dtype=float)
+        self.velocity_limits = np.asarray(self.velocity_limits, dtype=float)
+        self.last_q: np.ndarray | None = None
+        self.last_stamp = 0.0            # header stamp of the last accepted state; 0: none
+        self.last_time = -np.inf         # host time of the last accepted state
+        self.refused_at = -np.inf        # host time of the last refusal
+        self.refusal = ''                # its reason
+        self.refused = 0
+
+    def check(self, now: float, names: Sequence[str], positions: Sequence[float],
+              velocities: Sequence[float] = (), stamp: float = 0.0
+              ) -> tuple[np.ndarray, np.ndarray | None]:
+        """
+        Return the (positions, velocities or None) of a joint state received at now.
+
+        ``stamp`` is its header stamp [s] (0: unstamped).  Raises BadJointStateError, and
+        remembers the refusal (``refused_at``, ``refusal``), for a state that cannot be the arm's.
+        """
+        try:
+            q = self._check(now, names, positions, stamp)
+        except BadJointStateError as err:
+            self.refuse(now, str(err))
+            raise
+        self.last_q, self.last_time = q, now
+        if stamp > 0:
+            self.last_stamp = stamp
+        return q, values_by_name(names, velocities, self.joint_names)
+
+    def refuse(self, now: float, reason: str) -> None:
+        """Note a state refused at now (also one refused before it got here: undecodable)."""
+        self.refused_at, self.refusal = now, reason
+        self.refused += 1
+
+    def refused_within(self, now: float, span: float) -> str:
+        """Return the reason of a refusal in the last span seconds before now, else ''."""
+        return self.refusal if now - self.refused_at <= span else ''
+
+    def _check(self, now: float, names: Sequence[str], positions: Sequence[float],
+               stamp: float) -> np.ndarray:
+        q = positions_by_name(names, positions, self.joint_names)
+        over = np.maximum(self.lower - q, q - self.upper)
+        if over.max() > self.tolerance:
+            j = int(over.argmax())
+            raise BadJointStateError(
+                f'A{j + 1} at {q[j]:.4g} rad is outside its limits [{self.lower[j]:.3f}, '
+                f'{self.upper[j]:.3f}]')
+        q = np.clip(q, self.lower, self.upper)
+        if not np.isfinite(now):
+            raise BadJointStateError('no receive time')
+        if now - self.last_time > self.silence:
+            self.last_q, self.last_stamp = None, 0.0      # a new stream
+        if now < self.last_time:
+            raise BadJointStateError(f'time went backwards by {self.last_time - now:.3f} s')
+        if self.last_stamp > 0:
+            if stamp <= 0:
+                raise BadJointStateError('unstamped after stamped joint states: a second '
+                                         'publisher?')
+            if stamp <= self.last_stamp:
+                raise BadJointStateError(
+                    f'stamp {self.last_stamp - stamp:.3f} s older than the last one: a '
+                    f'repeated or replayed stream?' if stamp < self.last_stamp else
+                    'repeats the stamp of the last joint state: a repeated stream?')
+        if self.last_q is not None:
+            dt = stamp - self.last_stamp if stamp > 0 and self.last_stamp > 0 else \
+                now - self.last_time
+            step = np.abs(q - self.last_q)
+            excess = step - (JUMP_SPEED * self.velocity_limits * max(dt, 0.0) + JUMP_SLACK)
+            if excess.max() > 0:
+                j = int(excess.argmax())
+                raise BadJointStateError(
+                    f'A{j + 1} jumped {step[j]:.3f} rad in {dt:.3f} s, faster than the arm '
+                    f'can: a second joint-state publisher or an old configuration?')
+        return q

@@ -1,0 +1,494 @@
+# Copyright 2026 probdis_ros contributors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The planner node under bad input and faults, as real nodes over DDS (issue 14's table)."""
+
+import json
+import os
+from pathlib import Path
+import signal
+import subprocess
+import sys
+import threading
+import time
+
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+import numpy as np
+from probdis_ros.model import FailureMap, iiwa_arm
+from probdis_ros.model.arms import TaskSpace
+from probdis_ros.ros.bag_source import Bag
+from probdis_ros.ros.messages import duration
+from probdis_ros.ros.recorder import FLUSH_INTERVAL
+import pytest
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter
+from ros_harness import JOINTS, RosTest, wait_for
+from sensor_msgs.msg import JointState
+from test_ros_nodes import finished, free_scenario, GOAL, mock, planner, START
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+pytestmark = pytest.mark.ros
+ARM = iiwa_arm()
+TRAJECTORY = '/lbr/joint_trajectory_controller/joint_trajectory'
+
+
+@pytest.fixture
+def ros():
+    test = RosTest()
+    yield test
+    test.close()
+
+
+class Stream:
+    """Joint states at q from the probe at rate Hz, stamped by the probe's clock (or not)."""
+
+    def __init__(self, ros, q=START, rate=100.0, stamped=True, velocity=None):
+        self.ros, self.q, self.on = ros, np.asarray(q, dtype=float), True
+        self.stamped, self.velocity = stamped, velocity
+        ros.probe.create_timer(1.0 / rate, self._publish)
+
+    def message(self, q=None, names=None, stamp=None) -> JointState:
+        msg = JointState()
+        msg.name = list(names if names is not None else JOINTS)
+        msg.position = [float(v) for v in (self.q if q is None else q)]
+        if self.velocity is not None:
+            msg.velocity = [float(v) for v in self.velocity]
+        if self.stamped:
+            msg.header.stamp = stamp or self.ros.probe.get_clock().now().to_msg()
+        return msg
+
+    def _publish(self):
+        if self.on:
+            self.ros.js_pub.publish(self.message())
+
+    def cancel(self):
+        self.on = False
+
+
+def diagnostics(ros) -> list[DiagnosticStatus]:
+    """Subscribe to /diagnostics; return the list the planner's statuses are appended to."""
+    seen: list[DiagnosticStatus] = []
+    ros.probe.create_subscription(DiagnosticArray, '/diagnostics',
+                                  lambda m: seen.extend(m.status), 10)
+    return seen
+
+
+def stop_ends_at_rest_near(ros, q, count=0):
+    """Check every command is inside the limits and the last decelerates from q to rest."""
+    for position in ros.positions_commanded():
+        assert np.all(np.isfinite(position)) and ARM.within_limits(position)[0]
+    assert len(ros.trajectories) > count, 'no stop was sent'
+    last = ros.trajectories[-1][1]
+    assert np.abs(np.array(last.points[0].positions) - q).max() < 0.02
+    assert np.allclose(last.points[-1].velocities, 0.0)
+
+
+def outside(joint=0, value=3.0):
+    q = START.copy()
+    q[joint] = value
+    return q
+
+
+# ------------------------------------------------------------------ joint states, item 1
+
+
+@pytest.mark.parametrize('fault, reason', [
+    ('beyond_limit', 'outside its limits'),
+    ('huge', 'outside its limits'),
+    ('duplicate', 'named twice'),
+    ('older_stamp', 'older than the last'),
+    ('repeated_stamp', 'repeats the stamp'),
+    ('unstamped', 'unstamped after stamped'),
+    ('old_configuration', 'jumped'),
+])
+def test_a_joint_state_the_arm_cannot_have_stops_the_run_and_refuses_start(
+        ros, tmp_path, fault, reason):
+    node = planner(ros, tmp_path)
+    stream = Stream(ros)
+    wait_for(lambda: ros.call('start').success, 10, 'start')
+    count = len(ros.trajectories)
+    stream.cancel()
+    time.sleep(0.05)
+    last = node.state_check.last_stamp
+    sec, nanosec = int(last), round((last - int(last)) * 1e9)
+    bad = {
+        'beyond_limit': lambda: stream.message(outside(0, 3.0)),
+        'huge': lambda: stream.message(outside(3, 1e6)),
+        'duplicate': lambda: stream.message([*START, START[0] + 0.3], [*JOINTS, 'lbr_A1']),
+        'older_stamp': lambda: stream.message(stamp=Time(sec=sec - 1, nanosec=nanosec)),
+        'repeated_stamp': lambda: stream.message(stamp=Time(sec=sec, nanosec=nanosec)),
+        'unstamped': lambda: Stream(ros, rate=1e-3, stamped=False).message(),
+        'old_configuration': lambda: stream.message(outside(0, START[0] + 0.3)),
+    }[fault]()
+    ros.js_pub.publish(bad)
+    wait_for(lambda: finished(ros), 5, 'the run to stop')
+    status = ros.status
+    assert status['state'] == 'stopped'
+    assert 'joint state refused' in status['message'] and reason in status['message'], status
+    # nothing built from the refused state: the stop decelerates from the last accepted one
+    stop_ends_at_rest_near(ros, START, count)
+    assert np.allclose(node.measured, START)
+    # fresh, good states again: ~/start is refused for a while after the refusal, then taken
+    Stream(ros)
+    refused = ros.call('start')
+    assert not refused.success and 'refused' in refused.message and reason in refused.message
+    wait_for(lambda: ros.call('start').success, 10, 'a start once the refusal is old')
+
+
+def test_joint_states_outside_the_limits_are_never_taken_and_start_is_refused(ros, tmp_path):
+    node = planner(ros, tmp_path)
+    Stream(ros, outside(0, 3.0))
+    wait_for(lambda: node.state_check.refused >= 3, 5, 'refused states')
+    response = ros.call('start')
+    assert not response.success and 'A1 at 3 rad is outside its limits' in response.message
+    assert node.measured is None and not ros.trajectories
+
+
+def test_a_position_a_hair_past_a_limit_is_clamped_to_it(ros, tmp_path):
+    node = planner(ros, tmp_path)
+    q = START.copy()
+    q[1] = ARM.upper[1] + 0.001
+    Stream(ros, q)
+    wait_for(lambda: node.measured is not None, 5, 'a joint state')
+    assert node.measured[1] == ARM.upper[1] and ARM.within_limits(node.measured)[0]
+
+
+def test_a_second_publisher_repeating_an_old_configuration_is_refused(ros, tmp_path):
+    node = planner(ros, tmp_path)
+    Stream(ros, stamped=False)
+    old = Stream(ros, outside(1, START[1] - 0.3), rate=30.0, stamped=False)
+    wait_for(lambda: node.state_check.refused >= 3, 5, 'refused states')
+    response = ros.call('start')
+    assert not response.success and 'jumped' in response.message
+    old.cancel()
+    wait_for(lambda: ros.call('start').success, 10, 'a start once it has gone')
+    assert np.allclose(node.measured, START)
+
+
+def test_stop_without_a_run_decelerates_from_the_measured_velocity(ros, tmp_path):
+    planner(ros, tmp_path)
+    velocity = np.array([0.5, -0.3, 0.2, 0.0, 0.4, 0.0, -0.2])
+    Stream(ros, velocity=velocity)
+    wait_for(lambda: ros.status.get('state') == 'idle', 10, 'the planner')
+    time.sleep(0.2)
+    response = ros.call('stop')
+    assert response.success and 'decelerating' in response.message
+    wait_for(lambda: ros.trajectories, 5, 'the stop')
+    points = ros.trajectories[-1][1].points
+    velocities = np.array([p.velocities for p in points])
+    positions = np.array([p.positions for p in points])
+    assert len(points) > 5, 'a deceleration, not a hold'
+    assert np.abs(velocities[0] - velocity).max() < 0.15 and np.allclose(velocities[-1], 0.0)
+    assert np.abs(np.diff(velocities, axis=0)).max() <= 10.0 * 0.01 * 1.01
+    assert ARM.within_limits(positions).all()
+
+
+# ------------------------------------------------------------------ file faults, item 4
+
+
+def test_a_full_disk_stops_the_recording_not_the_run(ros, tmp_path):
+    node = planner(ros, tmp_path, velocity_scaling=0.5)
+    mock(ros, free_scenario(tmp_path))
+    seen = diagnostics(ros)
+    wait_for(lambda: ros.call('start').success, 20, 'start')
+    wait_for(lambda: ros.status.get('state') == 'executing', 20, 'motion')
+    storage = node.recorder.writer.storage
+    storage.bio, real = open('/dev/full', 'wb'), storage.bio
+    real.close()
+    wait_for(lambda: ros.status.get('errors'), 5, 'the error in the status')
+    assert 'No space left on device' in ros.status['errors'][0]
+    assert 'the run goes on unrecorded' in ros.status['errors'][0]
+    wait_for(lambda: any(d.level == DiagnosticStatus.ERROR and 'No space' in d.message
+                         for d in seen), 5, 'an ERROR diagnostic')
+    # the node lives on and supervises the arm to the end of the run
+    wait_for(lambda: finished(ros), 60, 'the run to end')
+    assert ros.status['state'] == 'succeeded' and node.recorder is None
+    # a new run records again (at the goal now: nothing to do) and clears the error
+    response = ros.call('start')
+    assert response.success and 'already at the goal' in response.message
+    wait_for(lambda: not ros.status.get('errors'), 5, 'the error cleared')
+
+
+def test_reset_map_answers_failure_when_the_cleared_map_cannot_be_written(ros, tmp_path):
+    fmap = FailureMap(ARM.task_space)
+    fmap.add([0.5, 0, 0.4], [0, 0, 1], [1, 0, 0, 0])
+    fmap.save(tmp_path / 'map.json')
+    planner(ros, tmp_path)
+    seen = diagnostics(ros)
+    wait_for(lambda: ros.status.get('failures') == 1, 10, 'the map to load')
+    (tmp_path / 'map.json').unlink()
+    (tmp_path / 'map.json').mkdir()          # what a rename onto the file now meets
+    response = ros.call('reset_map')
+    assert not response.success and 'not cleared' in response.message
+    assert 'keeps its 1 failures' in response.message
+    wait_for(lambda: ros.status.get('errors'), 5, 'the error in the status')
+    assert ros.status['failures'] == 1 and 'cannot write the failure map' in \
+        ros.status['errors'][0]
+    wait_for(lambda: any(d.level == DiagnosticStatus.ERROR for d in seen), 5, 'diagnostics')
+    # writable again: the reset goes through and the error clears
+    (tmp_path / 'map.json').rmdir()
+    response = ros.call('reset_map')
+    assert response.success and 'cleared 1' in response.message
+    wait_for(lambda: not ros.status.get('errors'), 5, 'the error cleared')
+    assert len(FailureMap.load(tmp_path / 'map.json')) == 0
+
+
+@pytest.mark.parametrize('content, aside, words', [
+    (b'\xff\xfe\x00garbage', 'unreadable', 'not UTF-8'),
+    (None, 'point3', 'is a point3 map'),
+])
+def test_a_map_file_that_cannot_be_used_is_named_and_kept_aside(
+        ros, tmp_path, capfd, content, aside, words):
+    path = tmp_path / 'map.json'
+    if content is None:
+        other = FailureMap(TaskSpace.POINT3)
+        other.add([0.5, 0, 0.4], [0, 0, 1])
+        other.save(path)
+        content = path.read_bytes()
+    else:
+        path.write_bytes(content)
+    planner(ros, tmp_path)
+    wait_for(lambda: ros.status.get('state') == 'idle', 10, 'the planner')
+    copies = list(tmp_path.glob(f'map.json.{aside}-*'))
+    assert len(copies) == 1 and copies[0].read_bytes() == content
+    lines = [line for line in capfd.readouterr().err.splitlines() if str(path) in line]
+    assert len(lines) == 1 and words in lines[0] and str(copies[0]) in lines[0]
+    assert ros.status['failures'] == 0 and not ros.status['errors']
+
+
+def test_a_map_file_that_is_a_pipe_neither_hangs_nor_is_written(ros, tmp_path):
+    path = tmp_path / 'map.json'
+    os.mkfifo(path)
+    planner(ros, tmp_path)
+    wait_for(lambda: ros.status.get('errors'), 10, 'the planner, with an error')
+    assert 'not a regular file' in ros.status['errors'][0]
+    response = ros.call('reset_map')
+    assert not response.success
+    assert path.is_fifo()
+
+
+# ------------------------------------------------------------------ smaller ones, item 5
+
+
+def test_a_start_at_the_goal_does_not_move(ros, tmp_path):
+    planner(ros, tmp_path, goal=START.tolist())
+    Stream(ros)
+    wait_for(lambda: ros.call('start').success, 10, 'start')
+    wait_for(lambda: finished(ros), 5, 'the end')
+    assert ros.status['state'] == 'succeeded' and 'already at the goal' in ros.status['message']
+    time.sleep(0.3)
+    assert not ros.trajectories
+
+
+def test_a_new_run_resets_the_status_message(ros, tmp_path):
+    planner(ros, tmp_path)
+    seen = diagnostics(ros)
+    Stream(ros)
+    wait_for(lambda: ros.call('start').success, 10, 'start')
+    assert ros.call('stop').success
+    wait_for(lambda: ros.status.get('message') == 'stopped on request', 5, 'the stop')
+    time.sleep(REFUSAL_FREE)
+    assert ros.call('start').success
+    wait_for(lambda: ros.status.get('state') in ('planning', 'executing'), 5, 'the new run')
+    assert ros.status['message'] == 'running' and ros.status['outcome'] == ''
+    count = len(seen)
+    wait_for(lambda: len(seen) > count, 5, 'diagnostics')
+    assert seen[-1].message != 'stopped on request'
+
+
+REFUSAL_FREE = 0.1
+
+
+def test_stop_cancels_the_planning_and_the_next_run_does_not_wait_for_it(ros, tmp_path):
+    node = planner(ros, tmp_path, plan_time=20.0)
+    Stream(ros)
+    wait_for(lambda: ros.call('start').success, 10, 'start')
+    time.sleep(0.3)
+    assert ros.status['state'] == 'planning'
+    assert ros.call('stop').success
+    wait_for(lambda: ros.status.get('state') == 'stopped', 2, 'the stop')
+    assert node.plan_future is None
+    node.set_parameters([Parameter('plan_time', value=0.0)])
+    t0 = time.monotonic()
+    assert ros.call('start').success
+    wait_for(lambda: any(len(m.points) > 1 for _, m in ros.trajectories), 15, 'a path')
+    assert time.monotonic() - t0 < 15.0      # the abandoned plan had 20 s to go
+
+
+def planner_process(ros, tmp_path, *params, stderr=None):
+    """Run the planner node as its own process in the test's domain."""
+    command = [sys.executable, '-m', 'probdis_ros.ros.planner_node', '--ros-args',
+               '-p', f'goal:={GOAL.tolist()}', '-p', f'map_file:={tmp_path / "map.json"}',
+               '-p', f'bag_dir:={tmp_path / "bags"}', '-p', 'state_timeout:=2.0']
+    for param in params:
+        command += ['-p', param]
+    env = dict(os.environ, ROS_DOMAIN_ID=str(ros.domain))
+    return subprocess.Popen(command, env=env, stderr=stderr, text=True)
+
+
+@pytest.mark.parametrize('param, name', [
+    ('goal:=[1, 2, 3]', 'goal'),
+    ('velocity_scaling:=0.0', 'velocity_scaling'),
+    ('max_paths:=0', 'max_paths'),
+])
+def test_startup_parameters_out_of_range_give_one_line_naming_the_parameter(
+        ros, tmp_path, param, name):
+    process = planner_process(ros, tmp_path, param, stderr=subprocess.PIPE)
+    try:
+        _, err = process.communicate(timeout=60)
+    finally:
+        if process.poll() is None:
+            process.kill()
+    assert process.returncode == 2
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert len(lines) == 1 and name in lines[0] and 'Traceback' not in err, err
+
+
+def test_sigint_ends_a_planner_in_the_middle_of_a_long_plan(ros, tmp_path):
+    Stream(ros)
+    process = planner_process(ros, tmp_path, 'plan_time:=30.0')
+    try:
+        wait_for(lambda: ros.call('start', timeout=60).success, 60, 'start')
+        wait_for(lambda: ros.status.get('state') == 'planning', 10, 'planning')
+        process.send_signal(signal.SIGINT)
+        assert process.wait(10) == 0
+    finally:
+        if process.poll() is None:
+            process.kill()
+
+
+# ------------------------------------------------------------------ item 2
+
+
+class Controller:
+    """A stand-in controller subscribed to a trajectory topic, on an executor of its own."""
+
+    def __init__(self, ros, topic):
+        self.node = rclpy.create_node('controller', context=ros.context)
+        self.node.create_subscription(JointTrajectory, topic, lambda m: None, 10)
+        self.executor = SingleThreadedExecutor(context=ros.context)
+        self.executor.add_node(self.node)
+        self.thread = threading.Thread(target=self.executor.spin, daemon=True)
+        self.thread.start()
+
+    def close(self):
+        """Go away: stop spinning, then destroy the node (never while it spins)."""
+        self.executor.shutdown(timeout_sec=2.0)
+        self.thread.join(5.0)
+        self.node.destroy_node()
+
+
+def test_start_is_refused_without_a_controller_and_a_run_stops_when_it_goes(ros, tmp_path):
+    topic = '/nobody/joint_trajectory'       # the probe listens on the default topic only
+    planner(ros, tmp_path, trajectory_topic=topic)
+    Stream(ros)
+    wait_for(lambda: ros.status.get('state') == 'idle', 10, 'the planner')
+    time.sleep(0.5)
+    response = ros.call('start')
+    assert not response.success and f'nothing subscribes to {topic}' in response.message
+    controller = Controller(ros, topic)
+    try:
+        wait_for(lambda: ros.call('start').success, 10, 'a start with a controller')
+    finally:
+        controller.close()
+    wait_for(lambda: finished(ros), 5, 'the run to stop')
+    assert ros.status['state'] == 'stopped' and 'controller is gone' in ros.status['message']
+
+
+def test_a_foreign_command_on_the_trajectory_topic_stops_the_run_and_learns_nothing(
+        ros, tmp_path):
+    planner(ros, tmp_path, velocity_scaling=0.5)
+    arm = mock(ros, free_scenario(tmp_path))
+    wait_for(lambda: ros.call('start').success, 20, 'start')
+    wait_for(lambda: ros.status.get('state') == 'executing', 20, 'motion')
+    # another node sends the arm elsewhere: the gap to our command is no block
+    intruder = ros.probe.create_publisher(JointTrajectory, TRAJECTORY, 10)
+    elsewhere = JointTrajectory(joint_names=JOINTS)
+    elsewhere.points = [JointTrajectoryPoint(positions=(arm.q - 0.3).tolist(),
+                                             time_from_start=duration(0.3))]
+    intruder.publish(elsewhere)
+    wait_for(lambda: finished(ros), 5, 'the run to stop')
+    assert ros.status['state'] == 'stopped', ros.status
+    assert 'did not send' in ros.status['message'] or \
+        '/probe also publishes' in ros.status['message']
+    assert ros.status['failures'] == 0
+    refused = ros.call('start')
+    assert not refused.success and '/probe also publishes' in refused.message
+    del intruder                         # destroyed with the probe (never while spinning)
+
+
+def test_a_second_planner_of_the_same_name_refuses_to_start(ros, tmp_path):
+    first = planner(ros, tmp_path)
+    Stream(ros)
+    second = planner_process(ros, tmp_path, stderr=subprocess.PIPE)
+    try:
+        _, err = second.communicate(timeout=60)
+    finally:
+        if second.poll() is None:
+            second.kill()
+    assert second.returncode == 2 and 'Traceback' not in err, err
+    assert 'another node named /probdis_planner is running' in err
+    # the first lives on, alone again
+    wait_for(lambda: ros.call('start').success, 10, 'a start of the first')
+    assert first.active
+
+
+def test_a_bag_name_taken_by_another_recorder_meanwhile_is_not_a_crash(
+        ros, tmp_path, monkeypatch):
+    """Two recorders racing for one bag folder (two planners): the loser takes the next name."""
+    node = planner(ros, tmp_path)
+    (tmp_path / 'bags' / 'run_fixed').mkdir(parents=True)
+    monkeypatch.setattr(time, 'strftime', lambda fmt: 'run_fixed')
+    real, calls = os.path.lexists, []
+
+    def racing(path):                  # the name was free when looked at, taken when opened
+        calls.append(path)
+        return real(path) if len(calls) > 1 else False
+    monkeypatch.setattr(os.path, 'lexists', racing)
+    node._open_bag()
+    monkeypatch.undo()
+    assert node.recorder is not None and not node.errors
+    assert Path(node.bag_path).name == 'run_fixed_2'
+
+
+# ------------------------------------------------------------------ item 6
+
+
+def test_a_planner_killed_with_sigkill_leaves_a_bag_replay_reads(ros, tmp_path, probdis):
+    mock(ros, free_scenario(tmp_path), rate=100.0)
+    process = planner_process(ros, tmp_path, 'velocity_scaling:=0.2')
+    try:
+        wait_for(lambda: ros.call('start', timeout=60).success, 60, 'start')
+        wait_for(lambda: ros.status.get('state') == 'executing', 20, 'motion')
+        time.sleep(2.0)
+        killed_at = time.time()
+        process.send_signal(signal.SIGKILL)
+        process.wait(10)
+    finally:
+        if process.poll() is None:
+            process.kill()
+    bags = list((tmp_path / 'bags').iterdir())
+    assert len(bags) == 1
+    mcap = next(bags[0].glob('*.mcap'))
+    assert mcap.stat().st_size > 0
+    result = probdis('replay', str(bags[0]), '--json', check=False)
+    assert 'Traceback' not in result.stderr, result.stderr
+    summary = json.loads(result.stdout)
+    assert summary['paths'] >= 1, summary
+    # what is there ends at most about FLUSH_INTERVAL before the kill
+    with Bag(bags[0]) as bag:
+        last = max(message.stamp_ns for message in bag.messages()) * 1e-9
+    assert killed_at - last < FLUSH_INTERVAL + 1.0, killed_at - last

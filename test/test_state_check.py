@@ -1,0 +1,94 @@
+# Copyright 2026 probdis_ros contributors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""Joint states checked against the arm (no rclpy): what is refused, what is taken."""
+
+import re
+
+import numpy as np
+from probdis_ros.model import iiwa_arm
+from probdis_ros.motion.state_check import (
+    BadJointStateError,
+    LIMIT_TOLERANCE,
+    SILENCE,
+    StateCheck,
+)
+import pytest
+
+ARM = iiwa_arm()
+NAMES = [f'lbr_A{i}' for i in range(1, 8)]
+Q = np.array([0.3, 0.2, 0.0, -1.1, 0.0, 0.6, 0.0])
+
+
+def gate() -> StateCheck:
+    return StateCheck(NAMES, ARM.lower, ARM.upper, ARM.velocity_limits)
+
+
+@pytest.mark.parametrize('names, positions, reason', [
+    (NAMES, [*Q[:6], 3.1], 'A7 at 3.1 rad is outside its limits'),
+    (NAMES, [1e6, *Q[1:]], 'A1 at 1e+06 rad is outside'),
+    ([*NAMES, 'lbr_A1'], [*Q, 0.0], 'lbr_A1 is named twice'),
+    (NAMES[:6], Q[:6], 'missing joints lbr_A7'),
+    (NAMES, [np.nan, *Q[1:]], 'non-finite'),
+])
+def test_states_that_cannot_be_the_arms_are_refused_with_the_reason(names, positions, reason):
+    check = gate()
+    with pytest.raises(BadJointStateError, match=re.escape(reason)):
+        check.check(1.0, names, positions)
+    assert check.refused == 1 and reason in check.refused_within(1.5, 1.0)
+    assert check.refused_within(2.5, 1.0) == ''
+
+
+def test_a_position_within_the_tolerance_past_a_limit_is_clamped():
+    q = Q.copy()
+    q[1] = ARM.upper[1] + 0.5 * LIMIT_TOLERANCE
+    taken, _ = gate().check(1.0, NAMES, q)
+    assert taken[1] == ARM.upper[1]
+
+
+def test_time_going_backwards_and_repeated_or_missing_stamps_are_refused():
+    check = gate()
+    check.check(1.0, NAMES, Q, stamp=100.0)
+    for stamp, reason in ((99.0, 'older than the last'), (100.0, 'repeats the stamp'),
+                          (0.0, 'unstamped after stamped')):
+        with pytest.raises(BadJointStateError, match=reason):
+            check.check(1.01, NAMES, Q, stamp=stamp)
+    check.check(1.02, NAMES, Q, stamp=100.02)
+    with pytest.raises(BadJointStateError, match='time went backwards'):
+        check.check(1.0, NAMES, Q, stamp=100.03)
+
+
+def test_a_jump_is_refused_and_a_restarted_stream_is_taken():
+    check = gate()
+    check.check(1.0, NAMES, Q)
+    old = Q.copy()
+    old[0] += 0.3
+    with pytest.raises(BadJointStateError, match=re.escape('A1 jumped 0.300 rad')):
+        check.check(1.01, NAMES, old)
+    # a joint may move at its velocity limit (and a half) between states
+    fast = Q.copy()
+    fast[0] += 1.4 * ARM.velocity_limits[0] * 0.2
+    check.check(1.2, NAMES, fast)
+    # after a silence the stream is new: its first state is taken wherever it is
+    check.check(1.2 + SILENCE + 0.1, NAMES, old, stamp=5.0)
+
+
+def test_noise_of_0_005_rad_at_1_khz_is_never_refused():
+    check = gate()
+    rng = np.random.default_rng(0)
+    for k in range(5000):
+        t = k * 0.001
+        q = Q + np.sin(t) * 0.2 + rng.normal(0.0, 0.005, 7)
+        check.check(t, NAMES, q, stamp=100.0 + t)
+    assert check.refused == 0
