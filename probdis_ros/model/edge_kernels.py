@@ -336,6 +336,26 @@ def _descend(p_buf, count, cap, level):
     return level
 
 
+@numba.njit(cache=True, inline='always')
+def _edge_rotations(a, b, n, kind, cs, sn, cd, sd):
+    """
+    Write the edge a -> b's first joint angles and per-step increments as cos and sin.
+
+    On a planar chain the angles are cumulative (absolute link directions).
+    """
+    run0 = 0.0
+    run1 = 0.0
+    for j in range(a.shape[0]):
+        run0 += a[j]
+        run1 += b[j] - a[j]
+        angle = run0 if kind == PLANAR else a[j]
+        step = (run1 if kind == PLANAR else b[j] - a[j]) / n
+        cs[j] = np.cos(angle)
+        sn[j] = np.sin(angle)
+        cd[j] = np.cos(step)
+        sd[j] = np.sin(step)
+
+
 @numba.njit(cache=True, nogil=True)
 def _start_probability(cs, sn, n, kind, joint_params, offsets, bases, tip_offset,
                        tip_rotation, f_points, f_dirs, f_rots, c_fail, use_orient, prune, pos, rot,
@@ -386,17 +406,7 @@ def edge_cost_kernel(a, b, limit, delta, length_weight, risk_weight, cap, p_max,
     sn = np.empty(n_joints)
     cd = np.empty(n_joints)
     sd = np.empty(n_joints)
-    run0 = 0.0
-    run1 = 0.0
-    for j in range(n_joints):
-        run0 += a[j]
-        run1 += b[j] - a[j]
-        angle = run0 if kind == PLANAR else a[j]
-        step = (run1 if kind == PLANAR else b[j] - a[j]) / n
-        cs[j] = np.cos(angle)
-        sn[j] = np.sin(angle)
-        cd[j] = np.cos(step)
-        sd[j] = np.sin(step)
+    _edge_rotations(a, b, n, kind, cs, sn, cd, sd)
     level = cap
     if cap < np.inf:
         level = max(cap, _start_probability(cs, sn, n, kind, joint_params, offsets, bases,
@@ -486,17 +496,8 @@ def cheapest_edge_kernel(sources, target, base, toward, delta, length_weight, ri
         n = max(1, int(np.ceil(length / delta - 1e-12)))
         steps[i] = n
         weight[i] = risk_weight * (length / n) / delta
-        run0 = 0.0
-        run1 = 0.0
+        _edge_rotations(a, b, n, kind, cs[i], sn[i], cd[i], sd[i])
         for j in range(n_joints):
-            run0 += a[j]
-            run1 += b[j] - a[j]
-            angle = run0 if kind == PLANAR else a[j]
-            step = (run1 if kind == PLANAR else b[j] - a[j]) / n
-            cs[i, j] = np.cos(angle)
-            sn[i, j] = np.sin(angle)
-            cd[i, j] = np.cos(step)
-            sd[i, j] = np.sin(step)
             ends[i, j] = b[j]
     pos = np.empty((CHUNK, 3))
     rot = np.empty((CHUNK, 3, 3))
