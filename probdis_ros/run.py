@@ -39,6 +39,11 @@ retreat starts from where the arm is and goes back the way it came; a blocked re
 block too, and the next path is planned from where the arm is when the plan it was to run
 began elsewhere.  A driver that echoes the command instead of measuring stops the run.
 
+What it does not learn from: motion it did not command.  A path the arm does not begin to
+follow at all (nothing executes the commands) and an arm that moves while it should rest
+between commands (``UNCOMMANDED``: something else drives it) stop the run with the reason,
+nothing learned.
+
 What it refuses: a configuration that is not finite or lies outside the joint limits by more
 than ``LIMIT_TOLERANCE`` is never taken (the host's :mod:`probdis_ros.motion.state_check`
 refuses it first; a run that gets one anyway stops as for any refused joint state), and a
@@ -82,6 +87,9 @@ EXTRAPOLATE = 0.05
 #: An arm whose L1 velocity differs from its command's by more than this [rad/s] does not
 #: follow it (with its position within d_dist).
 FOLLOWING_SPEED = 0.5
+#: An arm at rest between commands that goes further than this x d_dist (L1) both from
+#: where it came to rest and from where the last command holds it is moved by something else.
+UNCOMMANDED = 1.5
 
 
 class Phase(str, Enum):
@@ -225,6 +233,8 @@ class Run:
         self.block_time: float | None = None
         self.retreat_sent = 0.0
         self.retreat_done_at: float | None = None
+        self.rest_at: np.ndarray | None = None           # where the arm came to rest
+        self.pressed = False                             # the last motion ended blocked
         self.latencies: list[float] = []
         self.outcome = ''
         self.message = 'ready'
@@ -234,10 +244,16 @@ class Run:
 
     # -- events ------------------------------------------------------------------------
 
-    def start(self, now: float, config: np.ndarray, velocity: np.ndarray | None = None
-              ) -> None:
-        """Start from config (and velocity), the newest measured state (at the goal: done)."""
+    def start(self, now: float, config: np.ndarray, velocity: np.ndarray | None = None,
+              running: JtcTrajectory | None = None) -> None:
+        """
+        Start from config (and velocity), the newest measured state (at the goal: done).
+
+        ``running`` is the host's last command where the arm may still be running it (the
+        end of the last run): where it comes to rest is no motion of anything else.
+        """
         self._now = now
+        self.trajectory = running
         self.outcome, self.message = '', 'running'
         problem = usable(self.arm, config)
         if problem:
@@ -246,6 +262,7 @@ class Run:
             return
         self.measured = np.clip(np.asarray(config, dtype=float), self.arm.lower, self.arm.upper)
         self.measured_at, self.measured_velocity = now, velocity
+        self.rest_at = self.measured.copy()
         if np.linalg.norm(self.measured - self.loop.goal) <= self.loop.goal_tolerance:
             self.finish(State.SUCCEEDED, 'already at the goal: nothing to do')
             return
@@ -274,14 +291,23 @@ class Run:
             self.following = bool(np.abs(q - self.measured).sum() <= self.settings.detection.d_dist
                                   and (velocity is None or
                                        np.abs(v - velocity).sum() <= FOLLOWING_SPEED))
-        if self.detector is None or not self.phase.active:
+        if not self.phase.active:
+            return
+        if self.detector is None:
+            self._check_rest()
             return
         verdict = self.detector.update(now, self.measured, effort)
         if verdict is Verdict.MOVING:
             return
         detector, self.detector = self.detector, None
+        self.rest_at = self.measured.copy()
+        self.pressed = verdict is Verdict.BLOCKED
         if verdict is Verdict.ECHO:
             self.finish(State.STOPPED, ECHO_MESSAGE)
+        elif verdict is Verdict.NOT_EXECUTED:
+            self.finish(State.STOPPED, f'{detector.reason}: nothing executes the commands (is '
+                                       f'the controller active?) or something holds the arm; '
+                                       f'stopped, nothing learned')
         elif self.phase is Phase.EXECUTING:
             if verdict is Verdict.DONE:
                 self._completed(self.measured)
@@ -292,6 +318,20 @@ class Run:
                 self._retreat_blocked(detector, now)
             self.retreat_done_at = now
             self._send_pending()
+
+    def _check_rest(self) -> None:
+        """Stop when the arm, at rest between commands, moves away on its own."""
+        if self.rest_at is None:
+            return
+        limit = UNCOMMANDED * self.settings.detection.d_dist
+        away = float(np.abs(self.measured - self.rest_at).sum())
+        if self.trajectory is not None:       # or where the last command holds it
+            held = self.trajectory.sample(np.inf)[0]
+            away = min(away, float(np.abs(self.measured - held).sum()))
+        if away > limit:
+            self.finish(State.STOPPED, f'the arm moved {away:.3f} rad (L1) while at rest between '
+                                       f'commands: something other than this planner drives it; '
+                                       f'stopped, nothing learned')
 
     def on_plan(self, path: np.ndarray | None) -> None:
         """Take the result of the last PlanFrom (None: no path within max_paths)."""
@@ -388,7 +428,12 @@ class Run:
         self.motion = motion
         self.trajectory = JtcTrajectory(command, self.measured, self.measured_velocity, now)
         self.following = True
-        self.detector = BlockDetector(self.trajectory, now, self.settings.detection)
+        # a path from a free arm must move it; one from an arm pressed against something
+        # (its retreat blocked) may be blocked at once
+        expect = path is not None and not self.pressed
+        self.detector = BlockDetector(self.trajectory, now, self.settings.detection,
+                                      expect_motion=expect)
+        self.rest_at = None
 
     def _completed(self, config: np.ndarray) -> None:
         self.loop.report_completed(config)

@@ -30,14 +30,18 @@ from probdis_ros.model import FailureMap, iiwa_arm
 from probdis_ros.model.arms import TaskSpace
 from probdis_ros.ros.bag_source import Bag
 from probdis_ros.ros.messages import duration
+from probdis_ros.ros.planner_node import CLOCK_STALL
 from probdis_ros.ros.recorder import FLUSH_INTERVAL
 import pytest
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
+from rclpy.qos import qos_profile_sensor_data
 from ros_harness import JOINTS, RosTest, wait_for
+from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
-from test_ros_nodes import finished, free_scenario, GOAL, mock, planner, START
+from std_msgs.msg import String
+from test_ros_nodes import finished, free_scenario, GOAL, mock, mock_process, planner, START
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 pytestmark = pytest.mark.ros
@@ -53,17 +57,31 @@ def ros():
 
 
 class Stream:
-    """Joint states at q from the probe at rate Hz, stamped by the probe's clock (or not)."""
+    """
+    Joint states at q from the probe at rate Hz, stamped by the probe's clock (or not).
 
-    def __init__(self, ros, q=START, rate=100.0, stamped=True, velocity=None):
+    ``drift`` [rad/s] moves q on from when it is set; ``publisher`` is another than the
+    probe's joint-state publisher.
+    """
+
+    def __init__(self, ros, q=START, rate=100.0, stamped=True, velocity=None, publisher=None):
         self.ros, self.q, self.on = ros, np.asarray(q, dtype=float), True
         self.stamped, self.velocity = stamped, velocity
+        self.publisher = publisher or ros.js_pub
+        self.drift, self.since = np.zeros(7), time.monotonic()
         ros.probe.create_timer(1.0 / rate, self._publish)
+
+    def move(self, drift):
+        """Move on from where it is at drift [rad/s]."""
+        self.q, self.since = self.q + self.drift * (time.monotonic() - self.since), \
+            time.monotonic()
+        self.drift = np.asarray(drift, dtype=float)
 
     def message(self, q=None, names=None, stamp=None) -> JointState:
         msg = JointState()
         msg.name = list(names if names is not None else JOINTS)
-        msg.position = [float(v) for v in (self.q if q is None else q)]
+        where = self.q + self.drift * (time.monotonic() - self.since)
+        msg.position = [float(v) for v in (where if q is None else q)]
         if self.velocity is not None:
             msg.velocity = [float(v) for v in self.velocity]
         if self.stamped:
@@ -72,7 +90,7 @@ class Stream:
 
     def _publish(self):
         if self.on:
-            self.ros.js_pub.publish(self.message())
+            self.publisher.publish(self.message())
 
     def cancel(self):
         self.on = False
@@ -492,3 +510,135 @@ def test_a_planner_killed_with_sigkill_leaves_a_bag_replay_reads(ros, tmp_path, 
     with Bag(bags[0]) as bag:
         last = max(message.stamp_ns for message in bag.messages()) * 1e-9
     assert killed_at - last < FLUSH_INTERVAL + 1.0, killed_at - last
+
+
+# ------------------------------------------------------------------ item 3: commanded motion
+
+
+def test_a_path_nothing_executes_stops_the_run_and_learns_nothing(ros, tmp_path):
+    """The controller takes the commands (the probe subscribes) but the arm never moves."""
+    planner(ros, tmp_path)
+    Stream(ros)
+    wait_for(lambda: ros.call('start').success, 10, 'start')
+    wait_for(lambda: finished(ros), 20, 'the run to stop')
+    status = ros.status
+    assert status['state'] == 'stopped' and status['failures'] == 0, status
+    assert 'has not moved since the command began' in status['message']
+    assert 'nothing executes the commands' in status['message']
+    assert any(len(msg.points) > 1 for _, msg in ros.trajectories), 'a path was sent'
+
+
+def test_an_arm_that_moves_while_idle_refuses_start(ros, tmp_path):
+    node = planner(ros, tmp_path)
+    stream = Stream(ros)
+    wait_for(lambda: node.measured is not None, 10, 'joint states')
+    stream.move([0.2, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+    time.sleep(0.6)
+    response = ros.call('start')
+    assert not response.success and 'something else drives it' in response.message, response
+    assert not ros.trajectories
+
+
+def test_an_arm_that_moves_while_it_should_rest_stops_the_run_and_learns_nothing(ros, tmp_path):
+    planner(ros, tmp_path, plan_time=3.0)        # planning: the arm must rest meanwhile
+    stream = Stream(ros)
+    wait_for(lambda: ros.call('start').success, 10, 'start')
+    stream.move([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.4])
+    wait_for(lambda: finished(ros), 10, 'the run to stop')
+    status = ros.status
+    assert status['state'] == 'stopped' and status['failures'] == 0, status
+    assert 'while at rest between commands' in status['message']
+    assert not any(len(msg.points) > 1 and msg.points[-1].velocities and
+                   np.any(msg.points[-1].velocities) for _, msg in ros.trajectories)
+    assert np.allclose(ros.trajectories[-1][1].points[-1].velocities, 0.0)
+
+
+def test_a_second_joint_state_publisher_stops_the_run_and_learns_nothing(ros, tmp_path):
+    planner(ros, tmp_path, plan_time=3.0)
+    Stream(ros)
+    wait_for(lambda: ros.call('start').success, 10, 'start')
+    # another node publishes a configuration too close to the arm's to be a jump
+    other = ros.probe.create_publisher(JointState, '/lbr/joint_states', qos_profile_sensor_data)
+    Stream(ros, START + 0.01, publisher=other)
+    wait_for(lambda: finished(ros), 10, 'the run to stop')
+    status = ros.status
+    assert status['state'] == 'stopped' and status['failures'] == 0, status
+    assert 'a second publisher of joint states' in status['message']
+    refused = ros.call('start')
+    assert not refused.success and 'a second publisher' in refused.message
+
+
+def test_a_block_is_seen_promptly_through_joint_state_noise_at_1khz(ros, tmp_path):
+    """0.005 rad of noise at 1 kHz: the stall is seen (before, only the gap ceiling was)."""
+    planner(ros, tmp_path, motion_delay=0.04, velocity_scaling=0.1)
+    arm = mock_process(ros, 'rate:=1000.0', 'noise:=0.005', 'seed:=2')
+    events = []
+    ros.probe.create_subscription(String, '/probdis_planner/failures',
+                                  lambda m: events.append(json.loads(m.data)), 10)
+    try:
+        wait_for(lambda: ros.call('start', timeout=30).success, 30, 'start')
+        wait_for(lambda: events or finished(ros), 60, 'the first block')
+        assert events, ros.status
+        assert events[0]['why'].startswith('stalled'), events[0]['why']
+        ros.call('stop')
+    finally:
+        arm.send_signal(signal.SIGINT)
+        arm.wait(10)
+
+
+# ------------------------------------------------------------------ item 3: use_sim_time
+
+
+def test_on_simulated_time_a_block_is_detected_on_the_simulated_clock(ros, tmp_path):
+    """The kinematic mock at half the wall clock's speed: detection and failure on its time."""
+    planner(ros, tmp_path, use_sim_time=True, velocity_scaling=0.3, motion_delay=0.04,
+            state_timeout=0.5)
+    arm = mock(ros, sim_time=True, real_time_factor=0.5)
+    events = []
+    ros.probe.create_subscription(
+        String, '/probdis_planner/failures',
+        lambda m: events.append((json.loads(m.data), arm.epoch + arm.robot.time, time.time())),
+        10)
+    wait_for(lambda: ros.call('start').success, 20, 'start')
+    wait_for(lambda: events or finished(ros), 60, 'the first block')
+    assert events, ros.status
+    event, sim_now, wall_now = events[0]
+    assert ros.status['failures'] >= 1 and ros.status['state'] != 'stopped', ros.status
+    # stamped on the simulated clock, which runs behind the wall clock here
+    assert sim_now - 1.0 < event['t'] <= sim_now + 0.05, (event['t'], sim_now)
+    assert wall_now - event['t'] > 0.5, (wall_now, event['t'])
+    ros.call('stop')
+
+
+def test_on_simulated_time_start_needs_a_running_clock_and_a_run_stops_with_it(ros, tmp_path):
+    node = planner(ros, tmp_path, use_sim_time=True, state_timeout=0.5, plan_time=5.0)
+    Stream(ros, stamped=False)                   # judged at the node's (simulated) clock
+    wait_for(lambda: node.measured is not None, 10, 'joint states')
+    response = ros.call('start')
+    assert not response.success and 'no /clock has arrived' in response.message
+    clock_pub = ros.probe.create_publisher(Clock, '/clock', 10)
+    sim = [1000.0]
+    clock_pub.publish(Clock(clock=Time(sec=1000)))
+    wait_for(lambda: node.sim_clock, 5, 'the clock')
+    time.sleep(CLOCK_STALL + 0.3)
+    response = ros.call('start')
+    assert not response.success and 'has not advanced' in response.message, response
+    # a running clock: the start is taken
+    running = [True]
+
+    def advance():
+        if running[0]:
+            sim[0] += 0.01
+            seconds = int(sim[0])
+            clock_pub.publish(Clock(clock=Time(sec=seconds,
+                                               nanosec=int((sim[0] - seconds) * 1e9))))
+    ros.probe.create_timer(0.01, advance)
+    wait_for(lambda: ros.call('start').success, 10, 'a start on a running clock')
+    assert ros.status.get('state') in ('planning', 'executing') or not finished(ros)
+    # the simulation pauses: the state timeout (simulated) cannot fire, the stalled clock
+    # stops the run after CLOCK_STALL of wall time
+    running[0] = False
+    t0 = time.monotonic()
+    wait_for(lambda: finished(ros), CLOCK_STALL + 10, 'the run to stop')
+    assert time.monotonic() - t0 > CLOCK_STALL - 0.5
+    assert 'has not advanced' in ros.status['message'], ros.status

@@ -32,7 +32,20 @@ joint impedance follows its command with a lag) with where it is.  The L1 gap
 * **done** when the trajectory has ended and the gap to its last point is at most ``d_dist``;
 * **echo** when the measured positions have followed the moving command with no lag at all
   for ``echo_time`` seconds: no arm in joint impedance does that, a driver that reports the
-  commanded position (the lbr stack's ``open_loop``) does, and it would hide every block.
+  commanded position (the lbr stack's ``open_loop``) does, and it would hide every block;
+* **not executed**, where the caller expects the arm to move (``expect_motion``: a path from
+  a free arm), when a gap-based block is seen, ``START_WAIT`` has passed (or the gap exceeds
+  ``START_GAP_FACTOR`` times a ceiling), and the arm has not moved at all since the command
+  began: nothing executes the command (an inactive
+  controller), or something else holds the arm; that is no block to learn.  An arm that
+  begins to move later than the command said (a large message delivered late, a busy
+  controller) was started late by its controller: the command is judged from when it began
+  (the trajectory's ``taken_at`` moves on by the delay), not taken for a block.
+
+Motion is judged through the noise (:func:`motion_over`): a straight line fitted to each
+joint over the window gives the motion, and the joint-state noise (estimated from the
+samples' second differences) widens the threshold by ``NOISE_SIGMAS`` standard errors, so
+that 0.005 rad of noise at 1 kHz neither hides a stall nor looks like motion.
 
 The ceilings and ``onset_gap`` grow by ``speed_allowance`` x the commanded speed (per joint,
 or L1): the lag that remains in fast free motion.  The **onset** of a block is where the gap
@@ -53,6 +66,51 @@ import numpy as np
 
 #: The span over which the gap's growth is judged when tracing a block back to its onset [s].
 RISE_WINDOW = 0.1
+#: Motion within this many standard errors of the noise is no motion.
+NOISE_SIGMAS = 3.0
+#: The arm's position at the start of a command, and now, are averaged over this long [s].
+ENDS = 0.05
+#: A free arm that has not moved this long [s] after a command began is not executing it.
+START_WAIT = 2.0
+#: ... or sooner, once its gap exceeds the ceilings this many times: an arm held from rest
+#: presses no harder than that while the controller may still be taking the command late.
+START_GAP_FACTOR = 3.0
+#: A controller that took a command later than this [s] after it was sent took it late.
+LATE_TAKE = 0.05
+
+
+def noise_of(positions: np.ndarray) -> np.ndarray:
+    """
+    Return each joint's noise (std. dev.) in consecutive samples (N, n), from second differences.
+
+    A smooth motion adds next to nothing to a second difference; white noise of std. dev. s
+    gives second differences of variance 6 s^2.
+    """
+    positions = np.asarray(positions, dtype=float)
+    if len(positions) < 3:
+        return np.zeros(positions.shape[1:])
+    second = positions[2:] - 2.0 * positions[1:-1] + positions[:-2]
+    return np.sqrt(np.mean(second ** 2, axis=0) / 6.0)
+
+
+def motion_over(times: np.ndarray, positions: np.ndarray) -> tuple[float, float]:
+    """
+    Return the L1 motion over samples (times, positions (N, n)) and what noise could fake.
+
+    The motion is each joint's least-squares slope times the span (an endpoint-to-endpoint
+    measure that averages the noise out); the second value is ``NOISE_SIGMAS`` times the sum
+    of those estimates' standard errors.
+    """
+    times = np.asarray(times, dtype=float)
+    positions = np.asarray(positions, dtype=float)
+    if len(times) < 2 or times[-1] <= times[0]:
+        return 0.0, 0.0
+    t = times - times.mean()
+    spread = float(np.sum(t * t))
+    slope = (t @ (positions - positions.mean(axis=0))) / spread
+    span = times[-1] - times[0]
+    error = noise_of(positions) * span / np.sqrt(spread)
+    return float(np.abs(slope).sum() * span), NOISE_SIGMAS * float(error.sum())
 
 
 class Verdict(str, Enum):
@@ -62,6 +120,7 @@ class Verdict(str, Enum):
     DONE = 'done'
     BLOCKED = 'blocked'
     ECHO = 'echo'
+    NOT_EXECUTED = 'not_executed'
 
 
 @dataclass
@@ -129,8 +188,13 @@ class BlockDetector:
     """
 
     def __init__(self, path, start_time: float, settings: DetectorSettings | None = None,
-                 gravity: Callable[[np.ndarray], np.ndarray] | None = None) -> None:
+                 gravity: Callable[[np.ndarray], np.ndarray] | None = None,
+                 expect_motion: bool = False) -> None:
         self.path = path
+        self.expect_motion = expect_motion      # a block without any motion: not executed
+        self.started = not expect_motion        # the arm has been seen to move
+        self.late = 0.0                         # how late the controller took the command [s]
+        self._first: list[np.ndarray] = []     # the samples of the first ENDS seconds
         self.settings = settings or DetectorSettings()
         if gravity is None and self.settings.torque_ceiling:
             gravity = gravity_model(self.settings.load_mass, self.settings.load_com)
@@ -163,6 +227,8 @@ class BlockDetector:
         allowance = s.speed_allowance * np.abs(velocity)
         self._track_onset(now, measured, velocity, s.onset_gap + float(allowance.sum()))
         self._history.append((now, measured.copy()))
+        if t <= ENDS or not self._first:
+            self._first.append(measured.copy())
         while self._history and self._history[0][0] < now - s.stall_time:
             self._history.popleft()
         ended = t >= self.path.duration + s.motion_delay
@@ -170,6 +236,8 @@ class BlockDetector:
             self.reason = (f'the measured positions followed the command with no lag for '
                            f'{s.echo_time:.1f} s')
             return Verdict.ECHO
+        if not self.started and self._begins_late(now, t):
+            return Verdict.MOVING           # judged from when it began, from the next sample
         if s.torque_ceiling and self.gravity is not None and effort is not None and \
                 len(effort) == len(measured):
             self.external_torque = np.asarray(effort, dtype=float) - self.gravity(measured)
@@ -185,19 +253,83 @@ class BlockDetector:
             return Verdict.MOVING
         ceiling = s.gap_ceiling + float(allowance.sum())
         if s.gap_ceiling and self.gap > ceiling:
-            return self._blocked(f'gap {self.gap:.3f} rad above the ceiling {ceiling:.3f}')
+            return self._gap_block(f'gap {self.gap:.3f} rad above the ceiling {ceiling:.3f}')
         over = self.joint_gaps - (s.joint_gap_ceiling + allowance)
         if s.joint_gap_ceiling and over.max() > 0:
             joint = int(over.argmax())
-            return self._blocked(f'joint A{joint + 1} gap {self.joint_gaps[joint]:.3f} rad above '
-                                 f'its ceiling {s.joint_gap_ceiling + allowance[joint]:.3f}')
+            limit = s.joint_gap_ceiling + allowance[joint]
+            return self._gap_block(f'joint A{joint + 1} gap {self.joint_gaps[joint]:.3f} rad '
+                                   f'above its ceiling {limit:.3f}')
         if ended and t >= self.path.duration + s.motion_delay + s.settle_time:
-            return self._blocked(f'gap {self.gap:.3f} rad {s.settle_time} s after the end')
-        oldest_time, oldest = self._history[0]
-        watched = now - oldest_time >= s.stall_time * 0.9
-        if watched and float(np.abs(measured - oldest).sum()) < s.stall_motion:
-            return self._blocked(f'stalled with gap {self.gap:.3f} rad')
+            return self._gap_block(f'gap {self.gap:.3f} rad {s.settle_time} s after the end')
+        if now - self._history[0][0] >= s.stall_time * 0.9:
+            times = np.array([sample[0] for sample in self._history])
+            motion, noise = motion_over(times, np.array([sample[1] for sample in self._history]))
+            if motion < s.stall_motion + noise:
+                return self._gap_block(f'stalled with gap {self.gap:.3f} rad (moved {motion:.3f} '
+                                       f'rad in {times[-1] - times[0]:.2f} s)')
         return Verdict.MOVING
+
+    def moved(self) -> tuple[float, float]:
+        """
+        Return how far (L1) the arm has moved since the command began, and the noise allowance.
+
+        The mean of the first ``ENDS`` seconds' samples against the mean of the last ``ENDS``
+        seconds'; the allowance is ``NOISE_SIGMAS`` standard errors of that difference plus
+        ``stall_motion``.
+        """
+        now = self._history[-1][0]
+        last = np.array([q for when, q in self._history if when >= now - ENDS])
+        first = np.array(self._first)
+        sigma = noise_of(np.array([q for _, q in self._history]))
+        error = sigma * np.sqrt(1.0 / len(first) + 1.0 / len(last))
+        return (float(np.abs(last.mean(axis=0) - first.mean(axis=0)).sum()),
+                self.settings.stall_motion + NOISE_SIGMAS * float(error.sum()))
+
+    def _begins_late(self, now: float, t: float) -> bool:
+        """
+        Tell whether the arm, still until now, has begun to move later than the command said.
+
+        If so, the command's start moves on to match (the controller took it late).
+        """
+        if not self._first or len(self._history) < 2:
+            return False
+        moved, allowance = self.moved()
+        if moved <= allowance:
+            return False
+        self.started = True
+        # when the command would have moved the arm as far as it has moved now
+        first = np.mean(self._first, axis=0)
+        steps = np.arange(0.0, max(t, 0.0) + 0.005, 0.005)
+        reached = np.array([float(np.abs(self._desired(tau)[0] - first).sum())
+                            for tau in steps]) >= moved
+        began = steps[int(np.argmax(reached))] if reached.any() else steps[-1]
+        late = t - began
+        if late <= LATE_TAKE:
+            return False
+        self.late += late
+        self.start_time += late
+        if hasattr(self.path, 'taken_at'):
+            self.path.taken_at += late          # the caller's model of the command too
+        self._recent.clear()
+        self._rising = None
+        self._echo_since = None
+        return True
+
+    def _gap_block(self, reason: str) -> Verdict:
+        """Return a block seen in the gap, or NOT_EXECUTED for an arm that never moved."""
+        if not self.started:
+            s = self.settings
+            within = (not s.gap_ceiling or self.gap <= START_GAP_FACTOR * s.gap_ceiling) and \
+                (not s.joint_gap_ceiling or
+                 self.joint_gaps.max() <= START_GAP_FACTOR * s.joint_gap_ceiling)
+            if self._history[-1][0] - self.start_time < START_WAIT and within:
+                return Verdict.MOVING             # the controller may take it late
+            moved, _ = self.moved()
+            self.reason = (f'the arm has not moved since the command began ({moved:.3f} rad '
+                           f'L1 in {self._history[-1][0] - self.start_time:.2f} s, {reason})')
+            return Verdict.NOT_EXECUTED
+        return self._blocked(reason)
 
     def _blocked(self, reason: str) -> Verdict:
         self.reason = reason
@@ -251,3 +383,37 @@ class BlockDetector:
     def segment(self, now: float) -> int:
         """Return the index of the segment commanded at time now."""
         return self.path.segment_at(now - self.start_time)
+
+
+class MotionWatch:
+    """The arm's recent motion, judged through the noise: feed it every accepted state."""
+
+    def __init__(self, window: float = 0.3) -> None:
+        self.window = window
+        self._samples: deque[tuple[float, np.ndarray]] = deque()
+
+    def add(self, now: float, q: np.ndarray) -> None:
+        """Take a measured configuration at now [s]."""
+        self._samples.append((now, np.asarray(q, dtype=float).copy()))
+        while self._samples and self._samples[0][0] < now - self.window:
+            self._samples.popleft()
+
+    def moving(self, now: float, threshold: float) -> float:
+        """
+        Return the L1 motion over the last window when the arm still moves, else 0.
+
+        It moves when the motion over the window exceeds threshold and the noise, and over
+        its second half half the threshold and the noise (an arm that has just come to rest
+        does not move).  Nothing heard for a window (or the samples not yet spanning most of
+        one): 0.
+        """
+        samples = [(t, q) for t, q in self._samples if t >= now - self.window]
+        if len(samples) < 4 or samples[-1][0] - samples[0][0] < 0.5 * self.window:
+            return 0.0
+        times = np.array([t for t, _ in samples])
+        positions = np.array([q for _, q in samples])
+        motion, noise = motion_over(times, positions)
+        recent = times >= times[-1] - 0.5 * (times[-1] - times[0])
+        lately, noise_lately = motion_over(times[recent], positions[recent])
+        return motion if motion > threshold + noise and \
+            lately > 0.5 * threshold + noise_lately else 0.0

@@ -25,7 +25,13 @@ A joint state is refused, with the reason, when it cannot be the arm's:
   second publisher), or the host's time base running back;
 * a jump: a joint moved further since the last accepted state than the arm can
   (``JUMP_SPEED`` x its velocity limit, plus ``JUMP_SLACK`` for noise): an old configuration
-  repeated by a second publisher, or a mixed-up joint order.
+  repeated by a second publisher, or a mixed-up joint order;
+* a second source: the publication sequence number (counted by each DDS publisher) not
+  after the last accepted one's: two publishers interleave on the topic, whatever they send;
+* staleness (with ``late`` set): a state that arrives more than ``late`` seconds later after
+  its stamp than the stream's quickest (a backlog delivered late: the arm was there then,
+  not now), or, on simulated time (``clock`` given), stamped more than ``late`` from the
+  clock (not on the simulated time at all).
 
 After ``SILENCE`` seconds without an accepted state the stream counts as new (a restarted
 driver): stamps and jumps are judged from its first state again.
@@ -91,6 +97,7 @@ class StateCheck:
     velocity_limits: np.ndarray
     tolerance: float = LIMIT_TOLERANCE
     silence: float = SILENCE
+    late: float | None = None        # seconds of lateness that make a state stale; None: off
 
     def __post_init__(self) -> None:
         """Start with no stream heard."""
@@ -100,28 +107,56 @@ class StateCheck:
         self.last_q: np.ndarray | None = None
         self.last_stamp = 0.0            # header stamp of the last accepted state; 0: none
         self.last_time = -np.inf         # host time of the last accepted state
+        self.last_sequence = 0           # its publication sequence number; 0: unknown
+        self.quickest = np.inf           # the stream's smallest receive time - stamp [s]
         self.refused_at = -np.inf        # host time of the last refusal
         self.refusal = ''                # its reason
         self.refused = 0
 
     def check(self, now: float, names: Sequence[str], positions: Sequence[float],
-              velocities: Sequence[float] = (), stamp: float = 0.0
-              ) -> tuple[np.ndarray, np.ndarray | None]:
+              velocities: Sequence[float] = (), stamp: float = 0.0, sequence: int = 0,
+              clock: float | None = None) -> tuple[np.ndarray, np.ndarray | None]:
         """
         Return the (positions, velocities or None) of a joint state received at now.
 
-        ``stamp`` is its header stamp [s] (0: unstamped).  Raises BadJointStateError, and
+        ``stamp`` is its header stamp [s] (0: unstamped), ``sequence`` its publisher's
+        publication sequence number (0: unknown), ``clock`` the simulated time it arrived at
+        (None: on wall time, ``now`` is the receive time).  Raises BadJointStateError, and
         remembers the refusal (``refused_at``, ``refusal``), for a state that cannot be the arm's.
         """
         try:
             q = self._check(now, names, positions, stamp)
+            self._check_source(now, stamp, sequence, clock)
         except BadJointStateError as err:
             self.refuse(now, str(err))
             raise
         self.last_q, self.last_time = q, now
         if stamp > 0:
             self.last_stamp = stamp
+            if clock is None:
+                self.quickest = min(self.quickest, now - stamp)
+        if sequence > 0:
+            self.last_sequence = sequence
         return q, values_by_name(names, velocities, self.joint_names)
+
+    def _check_source(self, now: float, stamp: float, sequence: int,
+                      clock: float | None) -> None:
+        """Refuse a state from a second publisher, or a stale one."""
+        if sequence > 0 and 0 < self.last_sequence and sequence <= self.last_sequence:
+            raise BadJointStateError(
+                f'publication sequence number {sequence} after {self.last_sequence}: a second '
+                f'publisher of joint states interleaves with the arm?')
+        if self.late is None or stamp <= 0:
+            return
+        if clock is not None:
+            if abs(stamp - clock) > self.late:
+                raise BadJointStateError(
+                    f'stamped {stamp - clock:+.3f} s from the simulated clock: not on its time, '
+                    f'or stale')
+        elif now - stamp - self.quickest > self.late:
+            raise BadJointStateError(
+                f'arrived {now - stamp - self.quickest:.3f} s later after its stamp than the '
+                f'quickest of its stream: stale (a backlog delivered late)')
 
     def refuse(self, now: float, reason: str) -> None:
         """Note a state refused at now (also one refused before it got here: undecodable)."""
@@ -146,6 +181,7 @@ class StateCheck:
             raise BadJointStateError('no receive time')
         if now - self.last_time > self.silence:
             self.last_q, self.last_stamp = None, 0.0      # a new stream
+            self.last_sequence, self.quickest = 0, np.inf
         if now < self.last_time:
             raise BadJointStateError(f'time went backwards by {self.last_time - now:.3f} s')
         if self.last_stamp > 0:

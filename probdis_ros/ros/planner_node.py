@@ -27,8 +27,11 @@ Safety: every commanded position is inside the joint limits and timed within
 outside the limits, time running back, a jump) is logged, stops a run (decelerating from the
 last accepted state) and refuses ``~/start`` for ``REFUSAL_HOLD`` seconds; stale joint states
 stop the run; ``~/stop`` decelerates to rest.  A start is refused without a subscriber on the
-trajectory topic (other than this node's recorder), and a run stops when it goes; a second
-node of this name refuses to start.  The failure map is written atomically after every new
+trajectory topic (other than this node's recorder), or while the arm moves with no command
+of this node running, and a run stops when the controller goes; a second node of this name
+refuses to start.  With use_sim_time everything runs on the node's clock (/clock), and a
+start is refused, a run stopped, while /clock does not advance (``CLOCK_STALL`` of wall
+time: the tick runs on the wall clock).  The failure map is written atomically after every new
 failure and reloaded at start-up; a file that cannot be read is copied aside, one that cannot
 be written is an error in the status and diagnostics (the run goes on, the map in memory).
 """
@@ -50,7 +53,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 import numpy as np
 from probdis_ros.model import FailureMap, FailureMapError, iiwa_arm
 from probdis_ros.model.failure_map import set_aside, write_document
-from probdis_ros.motion.detector import DetectorSettings
+from probdis_ros.motion.detector import DetectorSettings, MotionWatch
 from probdis_ros.motion.state_check import BadJointStateError, StateCheck, values_by_name
 from probdis_ros.planning import Disentangler, Method, METHODS, RRTSettings, State
 from probdis_ros.planning.prob_rrt import ROBOT_JOINT_MARGIN
@@ -75,9 +78,11 @@ from rcl_interfaces.msg import (
     ParameterDescriptor,
     SetParametersResult,
 )
+from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, qos_profile_sensor_data, QoSProfile
 from rclpy.serialization import deserialize_message
+from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
@@ -99,6 +104,9 @@ GRAPH_CHECK = 0.5
 #: A new planner refuses ~/start this long while a namesake shows in the graph: time to hear
 #: the namesake's ``~/instance`` announcement (the younger of two leaves) [s].
 DISCOVERY_WAIT = 3.0
+#: With use_sim_time, a /clock that has not advanced for this long on the wall clock has
+#: stopped: ~/start is refused and a run stops [s].
+CLOCK_STALL = 2.0
 
 
 def _float(text: str, low: float, high: float) -> ParameterDescriptor:
@@ -232,7 +240,15 @@ class PlannerNode(Node):
                           float(self.get_parameter('c_fail').value))
         self.get_logger().info(f'planner kernels ready in {seconds:.1f} s')
         self.state_check = StateCheck(self.joint_names, self.arm.lower, self.arm.upper,
-                                      self.arm.velocity_limits)
+                                      self.arm.velocity_limits,
+                                      late=self.get_parameter('state_timeout').value)
+        # the arm's motion while no run drives it (something else would be moving it)
+        self.motion_watch = MotionWatch(self.get_parameter('stall_time').value)
+        self.own_motion_until = -np.inf     # when this node's last command has run out
+        # with use_sim_time: the last /clock and the wall time it last advanced
+        self.sim_clock, self.sim_clock_advanced = 0, -np.inf
+        if self.use_sim_time:
+            self.create_subscription(ClockMsg, '/clock', self._on_clock, 10)
         self.measured: np.ndarray | None = None
         self.measured_velocity: np.ndarray | None = None
         self.measured_at = -np.inf
@@ -282,7 +298,9 @@ class PlannerNode(Node):
         self.create_service(Trigger, '~/start', self._on_start)
         self.create_service(Trigger, '~/stop', self._on_stop)
         self.create_service(Trigger, '~/reset_map', self._on_reset_map)
-        self.create_timer(0.01, self._tick)
+        # on the wall clock: with use_sim_time the run's timeouts read the node's (simulated)
+        # clock in the tick, and a /clock that stops must still be noticed
+        self.create_timer(0.01, self._tick, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.create_timer(1.0, self._publish_diagnostics)
         self._publish_status()
         self.get_logger().info(f'{NODE_NAME} ready: {len(self.fmap)} failures in the map')
@@ -443,6 +461,29 @@ class PlannerNode(Node):
             return received * 1e-9
         return self._now()
 
+    def _on_clock(self, msg: ClockMsg) -> None:
+        nanoseconds = msg.clock.sec * 1_000_000_000 + msg.clock.nanosec
+        if nanoseconds > self.sim_clock:
+            self.sim_clock, self.sim_clock_advanced = nanoseconds, time.monotonic()
+
+    def _clock_problem(self) -> str:
+        """Return why the simulated clock cannot drive a run ('' if it can, or on wall time)."""
+        if not self.use_sim_time:
+            return ''
+        if self.get_clock().now().nanoseconds == 0 or not self.sim_clock:
+            return 'use_sim_time is set but no /clock has arrived; is the simulation on?'
+        stalled = time.monotonic() - self.sim_clock_advanced
+        if stalled > CLOCK_STALL:
+            return (f'use_sim_time is set but /clock has not advanced for {stalled:.1f} s; is '
+                    f'the simulation paused or gone?')
+        return ''
+
+    def _sent_command(self, at: float, command) -> None:
+        """Note a command sent at ``at``: the arm may move until it has run out, and settled."""
+        self._sent.append(at)
+        self.own_motion_until = at + float(command.times[-1]) + \
+            self.get_parameter('motion_delay').value + self.get_parameter('settle_time').value
+
     def _on_start(self, request, response):
         response.success, response.message = self._start()
         self.get_logger().info(f'start: {response.message}')
@@ -451,12 +492,14 @@ class PlannerNode(Node):
     def _start(self) -> tuple[bool, str]:
         if self.active:
             return False, 'a run is already active; call ~/stop first'
-        if self.use_sim_time and self.get_clock().now().nanoseconds == 0:
-            return False, 'use_sim_time is set but no /clock has arrived; is the simulation on?'
+        clock = self._clock_problem()
+        if clock:
+            return False, clock
         namesake = self._namesake_refusal()
         if namesake:
             return False, namesake
         now = self._now()
+        self.state_check.late = self.get_parameter('state_timeout').value
         refused = self.state_check.refused_within(now, REFUSAL_HOLD)
         if refused:
             return False, (f'joint states were refused {now - self.state_check.refused_at:.1f} s '
@@ -473,6 +516,13 @@ class PlannerNode(Node):
                            f'{self.traj_pub.topic_name}: its commands would be taken for ours')
         if now - self.foreign_at <= REFUSAL_HOLD:
             return False, f'{self.foreign} {now - self.foreign_at:.1f} s ago; not starting'
+        moving = self.motion_watch.moving(now, self.get_parameter('stall_motion').value)
+        own = now <= self.own_motion_until      # the arm may still run this node's command
+        if moving and not own:
+            window = self.motion_watch.window
+            return False, (f'the arm is moving ({moving:.3f} rad in the last {window:.1f} s) '
+                           f'though this planner commands nothing: something else drives it; '
+                           f'not starting')
         goal = self.get_parameter('goal').value
         problem = self._goal_problem(goal)
         if problem:
@@ -488,11 +538,12 @@ class PlannerNode(Node):
         detection = DetectorSettings(**{name: value(name).value for name in DETECTOR_FIELDS})
         settings = RunSettings(**{name: value(name).value for name in RUN_FIELDS},
                                detection=detection)
+        running = self.run.trajectory if self.run is not None and own else None
         self.run = Run(self.arm, loop, settings, clock=self._now)
         self.plan_future = None
         self._open_bag()
         start = self.measured.copy()
-        self._guarded(self.run.start, self.measured_at, start, self.measured_velocity)
+        self._guarded(self.run.start, self.measured_at, start, self.measured_velocity, running)
         if self.run.outcome == 'succeeded':
             return True, f'already at the goal ({np.round(start, 3).tolist()}): nothing to do'
         return True, f'disentangling from {np.round(start, 3).tolist()}'
@@ -627,7 +678,7 @@ class PlannerNode(Node):
             command = rest_command(self.arm, settings.limits(self.arm), self.measured,
                                    self.measured_velocity)
             self.traj_pub.publish(trajectory_msg(command, self.joint_names))
-            self._sent.append(self._now())
+            self._sent_command(self._now(), command)
         response.success, response.message = True, (
             'no run active; decelerating to rest' if fresh else
             'no run active and no fresh joint state: nothing commanded')
@@ -665,7 +716,7 @@ class PlannerNode(Node):
             action = run.actions.pop(0)
             if isinstance(action, Send):
                 self.traj_pub.publish(trajectory_msg(action.command, self.joint_names))
-                self._sent.append(action.at)
+                self._sent_command(action.at, action.command)
                 if action.path is not None:
                     self._publish_markers(action.path)
             elif isinstance(action, PlanFrom):
@@ -720,6 +771,9 @@ class PlannerNode(Node):
             self._check_graph()
         if self.run is None:
             return
+        clock = self._clock_problem() if self.active else ''
+        if clock:
+            self._guarded(self.run.stop, f'{clock}; stopped')
         self._guarded(self.run.tick, now)
         if self.plan_future is not None and self.plan_future.done():
             future, self.plan_future = self.plan_future, None
@@ -761,11 +815,15 @@ class PlannerNode(Node):
         now = stamp if self.use_sim_time and stamp > 0 else self._receive_time(info)
         self._write_bag(self._record_topics[0][0], round(now * 1e9), data)
         try:
-            q, v = self.state_check.check(now, msg.name, msg.position, msg.velocity, stamp)
+            q, v = self.state_check.check(
+                now, msg.name, msg.position, msg.velocity, stamp,
+                sequence=info.get('publication_sequence_number') or 0,
+                clock=self._now() if self.use_sim_time and self.sim_clock else None)
         except BadJointStateError as err:
             self._refused(str(err))
             return
         self.measured, self.measured_velocity, self.measured_at = q, v, now
+        self.motion_watch.add(now, q)
         if self.run is not None:
             effort = values_by_name(msg.name, msg.effort, self.joint_names)
             self._guarded(self.run.on_joint_state, now, q, v, effort)

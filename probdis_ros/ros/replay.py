@@ -160,6 +160,7 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
     detector = None
     kind = ''
     after_block = False
+    pressed = False            # the last motion ended blocked: the next may not move at all
     last_path_done = False
     ended = False              # the planner said the run is over: what follows is its stop
     status_paths: list[int] = []
@@ -202,7 +203,10 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
                 kind = 'path'
                 result.paths += 1
                 last_path_done = False
-            detector = BlockDetector(timed, t, settings)
+            # as the live run: a path from a free arm must move it (one the controller takes
+            # late is judged from when it began)
+            detector = BlockDetector(timed, t, settings,
+                                     expect_motion=kind == 'path' and not pressed)
             continue
         try:
             q = joint_positions(msg, names)
@@ -226,9 +230,14 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
         # the measured torques, where the driver sends them (the torque ceiling's estimate)
         verdict = detector.update(t, q, values_by_name(msg.name, msg.effort, names))
         result.gaps.append(detector.gap)
+        if verdict is not Verdict.MOVING:
+            pressed = verdict is Verdict.BLOCKED
         if verdict is Verdict.DONE:
             if kind == 'path':
                 last_path_done = True
+            detector = None
+        elif verdict is Verdict.NOT_EXECUTED:
+            result.problems.append(f'{t:.3f} s: {detector.reason}: nothing executed the command')
             detector = None
         elif verdict is Verdict.BLOCKED:
             # the live run's rule: the failure is where the block began, moving the way the

@@ -1,0 +1,266 @@
+# Copyright 2026 probdis_ros contributors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+
+"""
+Commanded motion only, failures from blocks only (no rclpy): the detector through noise.
+
+What issue 14 asks of the rclpy-free parts: a stall is seen through 0.005 rad of joint-state
+noise at 1 kHz; an arm that never begins to follow a path was not commanded by anything that
+runs (nothing learned); an arm that moves while it should rest, a second publisher and
+stale states stop a run without learning.
+"""
+
+from dataclasses import dataclass
+import re
+
+import numpy as np
+from probdis_ros.model import iiwa_arm
+from probdis_ros.motion.detector import (
+    BlockDetector,
+    DetectorSettings,
+    motion_over,
+    MotionWatch,
+    START_WAIT,
+    Verdict,
+)
+from probdis_ros.motion.jtc import JtcTrajectory
+from probdis_ros.motion.profiles import from_state
+from probdis_ros.motion.state_check import BadJointStateError, StateCheck
+from probdis_ros.planning.disentangle import Disentangler
+from probdis_ros.run import Learned, Run, RunSettings, Send
+import pytest
+
+ARM = iiwa_arm()
+NAMES = [f'lbr_A{i}' for i in range(1, 8)]
+Q0 = np.array([0.3, 0.2, 0.0, -1.1, 0.0, 0.6, 0.0])
+Q1 = Q0 + np.array([0.6, 0.3, 0.0, 0.4, 0.0, -0.3, 0.0])
+NOISE = 0.005
+RATE = 1000.0
+SETTINGS = RunSettings()
+
+
+def trajectory(q0=Q0, q1=Q1) -> JtcTrajectory:
+    motion = from_state(q0, None, np.array([q0, q1]), SETTINGS.limits(ARM))
+    return JtcTrajectory(motion.command, q0, None, 0.0)
+
+
+def judge(detector, arm, until, seed=0):
+    """Feed arm(t) plus noise at RATE until a verdict other than MOVING; return (t, verdict)."""
+    rng = np.random.default_rng(seed)
+    for t in np.arange(0.0, until, 1.0 / RATE):
+        verdict = detector.update(t, arm(t) + rng.normal(0.0, NOISE, 7))
+        if verdict is not Verdict.MOVING:
+            return t, verdict
+    return None, Verdict.MOVING
+
+
+def follows(jtc, settings, blocked_at=np.inf):
+    """Return the arm: its command motion_delay late, stopped dead at blocked_at."""
+    return lambda t: jtc.sample(min(t, blocked_at) - settings.motion_delay)[0]
+
+
+# ------------------------------------------------------------------ the stall through noise
+
+
+@pytest.mark.parametrize('seed', range(3))
+def test_a_stall_is_seen_through_noise_at_1khz(seed):
+    # ceilings off: the stall test alone (summed noisy steps never fell below stall_motion)
+    settings = DetectorSettings(gap_ceiling=0.0, joint_gap_ceiling=0.0)
+    jtc = trajectory()
+    contact = 0.6
+    detected, verdict = judge(BlockDetector(jtc, 0.0, settings),
+                              follows(jtc, settings, contact), jtc.duration, seed)
+    assert verdict is Verdict.BLOCKED
+    # the gap passes d_dist shortly after contact; then one stall window
+    assert detected - contact < 0.2 + 1.5 * settings.stall_time, detected
+
+
+@pytest.mark.parametrize('seed', range(3))
+def test_free_motion_through_noise_is_never_a_stall(seed):
+    settings = DetectorSettings()
+    jtc = trajectory()
+    _, verdict = judge(BlockDetector(jtc, 0.0, settings), follows(jtc, settings),
+                       jtc.duration + 2.0, seed)
+    assert verdict is Verdict.DONE
+
+
+def test_the_motion_measure_averages_the_noise_out():
+    rng = np.random.default_rng(1)
+    times = np.arange(0.0, 0.3, 0.001)
+    still = Q0 + rng.normal(0.0, NOISE, (len(times), 7))
+    motion, noise = motion_over(times, still)
+    assert motion < noise and noise < 0.03      # summed steps: about 12 rad
+    moving = still + np.outer(times, np.full(7, 0.05))
+    motion, noise = motion_over(times, moving)
+    assert abs(motion - 7 * 0.05 * times[-1]) < noise and motion > noise
+
+
+# ------------------------------------------------------------------ a command nothing runs
+
+
+@pytest.mark.parametrize('expect, verdict', [(True, Verdict.NOT_EXECUTED),
+                                             (False, Verdict.BLOCKED)])
+def test_an_arm_that_never_moves_after_a_path_was_not_commanded_by_anything(expect, verdict):
+    jtc = trajectory()
+    detector = BlockDetector(jtc, 0.0, DetectorSettings(), expect_motion=expect)
+    _, seen = judge(detector, lambda t: Q0, jtc.duration + 1.0)
+    assert seen is verdict
+    if expect:
+        assert 'has not moved since the command began' in detector.reason
+
+
+def test_an_arm_held_from_rest_presses_no_harder_than_twice_the_ceilings_while_waiting():
+    # the wait for a late controller must not unbound the force: held at Q0 from the start,
+    # the run is stopped once a gap passes three times its ceiling, before START_WAIT
+    settings = DetectorSettings()
+    jtc = trajectory()
+    detector = BlockDetector(jtc, 0.0, settings, expect_motion=True)
+    when, seen = judge(detector, lambda t: Q0, jtc.duration + 1.0)
+    assert seen is Verdict.NOT_EXECUTED and when < START_WAIT
+    assert detector.gap <= 3 * settings.gap_ceiling + 0.05
+    assert detector.joint_gaps.max() <= 3 * settings.joint_gap_ceiling + 0.05
+
+
+@pytest.mark.parametrize('expect, verdict', [(True, Verdict.DONE), (False, Verdict.BLOCKED)])
+def test_a_command_the_controller_takes_late_is_judged_from_when_it_began(expect, verdict):
+    # a large message delivered 0.6 s late: the arm follows it from then, free
+    settings = DetectorSettings()
+    jtc = trajectory()
+    late = 0.6
+    detector = BlockDetector(jtc, 0.0, settings, expect_motion=expect)
+    _, seen = judge(detector, lambda t: jtc.sample(t - late - settings.motion_delay)[0],
+                    jtc.duration + late + 2.0)
+    assert seen is verdict
+    if expect:
+        assert abs(detector.late - late) < 0.05 and abs(jtc.taken_at - late) < 0.05
+
+
+def test_an_arm_that_moved_and_then_stopped_is_blocked_even_when_motion_was_expected():
+    settings = DetectorSettings()
+    jtc = trajectory()
+    _, verdict = judge(BlockDetector(jtc, 0.0, settings, expect_motion=True),
+                       follows(jtc, settings, 0.6), jtc.duration + 1.0)
+    assert verdict is Verdict.BLOCKED
+
+
+# ------------------------------------------------------------------ the run learns nothing
+
+
+@dataclass
+class Path:
+    path: np.ndarray
+
+
+class Planner:
+    def plan(self, start, goal, fmap, rng):
+        return Path(np.array([start, goal]))
+
+
+def run_from(q0=Q0, goal=Q1) -> Run:
+    loop = Disentangler(ARM, Planner(), goal, max_paths=5, seed=0, goal_tolerance=0.04)
+    run = Run(ARM, loop, RunSettings(), clock=lambda: run._now)
+    run.start(0.0, q0)
+    return run
+
+
+def learned(run) -> list:
+    return [a for a in run.actions if isinstance(a, Learned)]
+
+
+def test_a_path_the_arm_never_follows_stops_the_run_and_learns_nothing():
+    run = run_from()
+    run.on_plan(run.loop.next_path(Q0))
+    assert any(isinstance(a, Send) for a in run.actions)
+    for t in np.arange(0.001, 3.0, 0.001):
+        run.on_joint_state(t, Q0)
+        if not run.active:
+            break
+    assert run.outcome == 'stopped' and 'nothing executes the commands' in run.message
+    assert not learned(run) and len(run.loop.fmap) == 0
+
+
+def test_an_arm_moving_while_it_should_rest_stops_the_run_and_learns_nothing():
+    run = run_from()                     # planning: the arm rests where it started
+    velocity = np.array([0.3, 0, 0, 0, 0, 0, 0])
+    for t in np.arange(0.01, 2.0, 0.01):
+        run.on_joint_state(t, Q0 + velocity * t)
+        if not run.active:
+            break
+    assert run.outcome == 'stopped' and 'while at rest between commands' in run.message
+    assert t < 0.2 / 0.3 and not learned(run)
+
+
+def test_an_arm_still_running_the_last_command_at_a_new_start_is_no_foreign_motion():
+    # the previous run's last command still takes the arm 0.3 rad (L1) on to its end
+    end = Q0 + np.array([0.3, 0, 0, 0, 0, 0, 0])
+    running = trajectory(Q0, end)
+    loop = Disentangler(ARM, Planner(), Q1, max_paths=5, seed=0, goal_tolerance=0.04)
+    run = Run(ARM, loop, RunSettings(), clock=lambda: 0.0)
+    run.start(0.0, Q0, running=running)
+    for t in np.arange(0.01, running.duration + 0.5, 0.01):
+        run.on_joint_state(t, running.sample(t)[0])
+    assert run.active and run.phase.value == 'planning', run.message
+
+
+# ------------------------------------------------------------------ what the gate refuses
+
+
+def gate(late=None) -> StateCheck:
+    return StateCheck(NAMES, ARM.lower, ARM.upper, ARM.velocity_limits, late=late)
+
+
+def test_two_publishers_interleaving_are_refused_whatever_they_send():
+    check = gate()
+    near = Q0 + 0.01                      # within the jump allowance: no jump to see
+    check.check(0.00, NAMES, Q0, stamp=10.00, sequence=500)
+    check.check(0.01, NAMES, Q0, stamp=10.01, sequence=501)
+    with pytest.raises(BadJointStateError, match='a second publisher'):
+        check.check(0.015, NAMES, near, stamp=10.015, sequence=3)
+    check.check(0.02, NAMES, Q0, stamp=10.02, sequence=502)
+    # a restarted driver, after a silence, is a new stream
+    check.check(0.02 + 1.5, NAMES, Q0, stamp=11.6, sequence=1)
+
+
+def test_a_backlog_delivered_late_is_stale():
+    check = gate(late=0.5)
+    for k in range(10):
+        check.check(100.0 + 0.01 * k + 0.001, NAMES, Q0, stamp=100.0 + 0.01 * k)
+    # the stream pauses, then its queued states arrive at once
+    with pytest.raises(BadJointStateError, match=re.escape('stale (a backlog')):
+        check.check(100.9, NAMES, Q0, stamp=100.1)
+
+
+def test_on_simulated_time_a_state_stamped_off_the_clock_is_refused():
+    check = gate(late=0.5)
+    check.check(50.0, NAMES, Q0, stamp=50.0, clock=50.001)
+    with pytest.raises(BadJointStateError, match='from the simulated clock'):
+        check.check(1.7e9, NAMES, Q0, stamp=1.7e9, clock=50.02)
+
+
+def test_the_motion_watch_tells_an_arm_at_rest_from_one_that_moves():
+    rng = np.random.default_rng(2)
+    still, moving = MotionWatch(0.3), MotionWatch(0.3)
+    for t in np.arange(0.0, 0.5, 0.001):
+        still.add(t, Q0 + rng.normal(0.0, NOISE, 7))
+        moving.add(t, Q0 + rng.normal(0.0, NOISE, 7) + np.array([0.2, 0, 0, 0, 0, 0, 0]) * t)
+    assert still.moving(0.5, 0.005) == 0.0
+    assert moving.moving(0.5, 0.005) == pytest.approx(0.06, abs=0.02)
+
+
+def test_an_arm_that_has_just_come_to_rest_does_not_move():
+    watch = MotionWatch(0.3)
+    for t in np.arange(0.0, 0.5, 0.001):
+        watch.add(t, Q0 + np.array([0.5, 0, 0, 0, 0, 0, 0]) * min(t, 0.3))
+    assert watch.moving(0.5, 0.005) == 0.0
