@@ -644,9 +644,9 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument('--setting', choices=SETTINGS, help='2d, 3d or 3d-orient (default 2d)')
     sim.add_argument('--obstacles', type=_positive_int, default=10,
                      help='hidden obstacles of a random world')
-    sim.add_argument('--method', default='probabilistic',
+    sim.add_argument('--method', default='informed',
                      help=f'{", ".join(METHODS)}, or a method string: probabilistic[:C_FAIL], '
-                     'hard:Y[:C_HARD], epsilon:X (default probabilistic)')
+                     'hard:Y[:C_HARD], epsilon:X, informed[:IDEAS] (default informed)')
     sim.add_argument('--threshold', type=float, default=DEFAULT_THRESHOLD,
                      help='Y of the hard method')
     sim.add_argument('--epsilon', type=float, default=DEFAULT_EPSILON,
@@ -748,7 +748,8 @@ def build_parser() -> argparse.ArgumentParser:
                        'all): world w is the family world of seed SEED + w')
     sweep.add_argument('--methods',
                        default='probabilistic,hard:0.01,hard:0.02,epsilon:0.2,epsilon:0.4',
-                       help='comma-separated probabilistic[:C_FAIL], hard:Y[:C_HARD], epsilon:X')
+                       help='comma-separated probabilistic[:C_FAIL], hard:Y[:C_HARD], epsilon:X, '
+                       'informed[:IDEAS] (IDEAS: letters of abce)')
     sweep.add_argument('--worlds', type=int, default=100,
                        help='worlds per obstacle count or family')
     sweep.add_argument('--max-paths', type=int, default=20, help='N_ITER of each episode')
@@ -782,8 +783,9 @@ def build_parser() -> argparse.ArgumentParser:
     robot.add_argument('--real-time-factor', type=float, default=1.0,
                        help='with --sim-time: speed over the wall clock (at most); 0: as fast '
                        'as the mock can (commands may then be taken late)')
-    robot.add_argument('--methods', default='epsilon:0.2,hard:0.01,probabilistic',
-                       help='comma-separated probabilistic[:C_FAIL], hard:Y[:C_HARD], epsilon:X')
+    robot.add_argument('--methods', default='epsilon:0.2,hard:0.01,probabilistic,informed',
+                       help='comma-separated probabilistic[:C_FAIL], hard:Y[:C_HARD], epsilon:X, '
+                       'informed[:IDEAS] (IDEAS: letters of abce)')
     robot.add_argument('--out', default='results/robot', help='directory of robot_runs.jsonl '
                        'and the bags; runs already there are skipped')
     robot.add_argument('--velocity-scaling', type=float, default=0.2,

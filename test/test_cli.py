@@ -96,7 +96,7 @@ def test_sim_json_prints_the_episode(probdis):
 def test_sim_of_the_shipped_scenario_with_a_plot(probdis, tmp_path):
     out = tmp_path / 'demo.png'
     result = probdis('sim', '--scenario', 'demo_2d', '--plot', str(out))
-    assert 'demo_2d: probabilistic: disentangled' in result.stdout
+    assert 'demo_2d: informed: disentangled' in result.stdout   # the default method
     assert out.read_bytes()[:4] == b'\x89PNG'
 
 

@@ -31,7 +31,6 @@ import time
 
 import numpy as np
 from probdis_ros.model import iiwa_arm
-from probdis_ros.model.failure_map import FailureMap
 from probdis_ros.physics.simulated_robot import build_robot, RobotSettings
 from probdis_ros.planning import Disentangler, Method, RRTSettings, State
 from probdis_ros.planning.prob_rrt import ROBOT_JOINT_MARGIN
@@ -81,12 +80,12 @@ def run_physics_episode(scene: str, method: str | Method = 'probabilistic', seed
     robot, _ = build_robot('physics', scene, robot_settings)
     scene_doc = robot.engine.scene
     arm = iiwa_arm()
-    fmap = FailureMap(arm.task_space, method.map_c_fail())
+    fmap = method.failure_map(arm.task_space)
     # the planner node's default margin, so that offline runs plan as the node does
     rrt = rrt or RRTSettings(joint_margin=ROBOT_JOINT_MARGIN)
-    loop = Disentangler(arm, method.planner(arm, rrt), scene_doc.goal, fmap,
-                        max_paths=max_paths, seed=seed, goal_tolerance=goal_tolerance,
-                        min_retreat=min_retreat)
+    loop = method.disentangler(arm, method.planner(arm, rrt), scene_doc.goal, fmap,
+                               max_paths=max_paths, seed=seed, goal_tolerance=goal_tolerance,
+                               min_retreat=min_retreat)
     run = Run(arm, loop, run_settings or RunSettings())
     failures, commands = [], []
     times, configs, gaps, forces = [], [], [], []

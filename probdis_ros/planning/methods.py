@@ -15,20 +15,32 @@
 """
 Methods: the method string parsed, and its planner built, in one place.
 
-``probabilistic[:C_FAIL]``, ``hard:Y[:C_HARD]`` and ``epsilon:X`` name a method and its
-parameter everywhere (the CLI, the sweep, the robot experiment, the planner node).  A
-:class:`Method` knows the C_FAIL of the map its loop learns (``probabilistic:C`` sets it;
-the others use the default) and builds its planner: ProbRRT with an objective, or Epsilon.
+``probabilistic[:C_FAIL]``, ``hard:Y[:C_HARD]``, ``epsilon:X`` and ``informed[:IDEAS]``
+name a method and its parameter everywhere (the CLI, the sweep, the robot experiment, the
+planner node, which does not run ``informed``).  A :class:`Method` knows the C_FAIL of the
+map its loop learns (``probabilistic:C`` sets it; the others use the default) and builds
+its planner: ProbRRT with an objective, or Epsilon, and its map and loop (the paper's, but
+for ``informed``: :mod:`probdis_ros.planning.informed`, whose ideas are letters, e.g.
+``informed:ab``).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-from probdis_ros.model.arms import Arm
-from probdis_ros.model.failure_map import DEFAULT_C_FAIL
+import numpy as np
+from probdis_ros.model.arms import Arm, TaskSpace
+from probdis_ros.model.failure_map import DEFAULT_C_FAIL, FailureMap
 from probdis_ros.model.path_cost import DEFAULT_LENGTH_WEIGHT
+from probdis_ros.planning.disentangle import Disentangler
 from probdis_ros.planning.epsilon import DEFAULT_EPSILON, EpsilonPlanner
+from probdis_ros.planning.informed import (
+    check_ideas,
+    DEFAULT_IDEAS,
+    informed_loop,
+    informed_map,
+    informed_settings,
+)
 from probdis_ros.planning.objectives import (
     DEFAULT_THRESHOLD,
     FailureProbabilityObjective,
@@ -37,8 +49,8 @@ from probdis_ros.planning.objectives import (
 )
 from probdis_ros.planning.prob_rrt import ProbRRT, RRTSettings
 
-METHODS = ('probabilistic', 'hard', 'epsilon')
-_USAGE = 'probabilistic[:C_FAIL], hard:Y[:C_HARD], epsilon:X'
+METHODS = ('probabilistic', 'hard', 'epsilon', 'informed')
+_USAGE = 'probabilistic[:C_FAIL], hard:Y[:C_HARD], epsilon:X, informed[:IDEAS]'
 
 
 def _number(text: str, whole: str, low: float, high: float) -> float:
@@ -53,11 +65,12 @@ def _number(text: str, whole: str, low: float, high: float) -> float:
 
 @dataclass(frozen=True)
 class Method:
-    """A method and its parameter: probabilistic[:C_FAIL], hard:Y[:C_HARD] or epsilon:X."""
+    """A method and its parameter: probabilistic[:C_FAIL], hard:Y[:C_HARD], epsilon:X, informed."""
 
     name: str
     value: float | None = None
     c_hard: float | None = None     # hard only: C_FAIL of its forbidden regions
+    ideas: str | None = None        # informed only: its ideas' letters (None: the default)
 
     @classmethod
     def parse(cls, text: str) -> Method:
@@ -66,6 +79,10 @@ class Method:
         value, _, c_hard = rest.partition(':')
         if name not in METHODS:
             raise ValueError(f'unknown method {name!r} in {text!r} ({_USAGE})')
+        if name == 'informed':
+            if c_hard:
+                raise ValueError(f'{text!r}: only hard takes a second parameter ({_USAGE})')
+            return cls(name, ideas=check_ideas(value) if value else None)
         if not value:
             if name != 'probabilistic':
                 raise ValueError(f'{name} needs its parameter, e.g. {name}:0.01')
@@ -83,7 +100,8 @@ class Method:
         """Return the method of separate parameters (the node's, the CLI's flags)."""
         if name not in METHODS:
             raise ValueError(f'unknown method {name!r}; choose one of {", ".join(METHODS)}')
-        value = {'probabilistic': c_fail, 'hard': threshold, 'epsilon': epsilon}[name]
+        value = {'probabilistic': c_fail, 'hard': threshold, 'epsilon': epsilon,
+                 'informed': None}[name]
         return cls(name, None if value is None else float(value))
 
     @classmethod
@@ -95,6 +113,8 @@ class Method:
         return cls.from_parameters(text.strip(), threshold, epsilon, c_fail)
 
     def __str__(self) -> str:
+        if self.name == 'informed':
+            return self.name if self.ideas is None else f'{self.name}:{self.ideas}'
         if self.value is None:
             return self.name
         text = f'{self.name}:{self.value:g}'
@@ -106,7 +126,7 @@ class Method:
 
     def objective(self, length_weight: float = DEFAULT_LENGTH_WEIGHT):
         """Return the objective the planner minimises (None for Epsilon: no search)."""
-        if self.name == 'probabilistic':
+        if self.name in ('probabilistic', 'informed'):
             return FailureProbabilityObjective(length_weight)
         if self.name == 'hard':
             return HardThresholdObjective(
@@ -120,7 +140,30 @@ class Method:
         if self.name == 'epsilon':
             return EpsilonPlanner(arm, DEFAULT_EPSILON if self.value is None else self.value,
                                   joint_margin=settings.joint_margin if settings else 0.0)
+        if self.name == 'informed':
+            settings = informed_settings(self.idea_letters, settings)
         return ProbRRT(arm, settings, self.objective(length_weight))
+
+    @property
+    def idea_letters(self) -> str:
+        """Return the informed method's ideas ('' for the other methods)."""
+        if self.name != 'informed':
+            return ''
+        return DEFAULT_IDEAS if self.ideas is None else self.ideas
+
+    def failure_map(self, task_space: TaskSpace, c_fail: float | None = None) -> FailureMap:
+        """Return the empty map this method's loop learns (c_fail overrides its C_FAIL)."""
+        c_fail = self.map_c_fail() if c_fail is None else c_fail
+        if self.name == 'informed':
+            return informed_map(self.idea_letters, task_space, c_fail)
+        return FailureMap(task_space, c_fail)
+
+    def disentangler(self, arm: Arm, planner, goal: np.ndarray, fmap: FailureMap,
+                     **kwargs) -> Disentangler:
+        """Return this method's loop (the paper's, but informed's also learns free motion)."""
+        if self.name == 'informed':
+            return informed_loop(arm, planner, goal, fmap, **kwargs)
+        return Disentangler(arm, planner, goal, fmap, **kwargs)
 
 
 def make_planner(method: str | Method, arm: Arm, settings: RRTSettings | None = None,

@@ -77,6 +77,9 @@ def valid(record: dict) -> bool:
 
 def planner_arguments(method: Method, seed: int, velocity_scaling: float) -> list[str]:
     """Return the planner node's ROS arguments that select a method and seed."""
+    if method.name == 'informed' and method.idea_letters != 'a':
+        raise ValueError(f'{method}: the planner node runs bare informed (its map file keeps '
+                         'only failures); run the map ideas with --offline')
     params = {'method': method.name, 'seed': seed, 'velocity_scaling': velocity_scaling}
     if method.value is not None:
         params[{'probabilistic': 'c_fail', 'hard': 'threshold',

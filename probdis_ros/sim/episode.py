@@ -20,7 +20,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from probdis_ros.model.failure_map import FailureMap
 from probdis_ros.planning import Disentangler, Method, RRTSettings, State
 from probdis_ros.sim.compliant_arm import CompliantArm
 from probdis_ros.sim.worlds import World
@@ -84,8 +83,8 @@ def run_episode(world: World, method: str | Method = 'probabilistic', seed: int 
         method = Method.resolve(method)
     arm = world.arm
     planner = method.planner(arm, settings)
-    fmap = FailureMap(arm.task_space, method.map_c_fail() if c_fail is None else c_fail)
-    loop = Disentangler(arm, planner, world.goal, fmap, max_paths=max_paths, seed=seed)
+    fmap = method.failure_map(arm.task_space, c_fail)
+    loop = method.disentangler(arm, planner, world.goal, fmap, max_paths=max_paths, seed=seed)
     _, traces = drive(loop, world.compliant_arm(), world.start.copy())
     return EpisodeResult(loop.state is State.SUCCEEDED, loop.paths_tried, len(loop.fmap),
                          loop.plan_times, loop, world, traces, loop.empty_plans)
