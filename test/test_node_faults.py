@@ -423,7 +423,12 @@ def test_start_is_refused_without_a_controller_and_a_run_stops_when_it_goes(ros,
     finally:
         controller.close()
     wait_for(lambda: finished(ros), 5, 'the run to stop')
-    assert ros.status['state'] == 'stopped' and 'controller is gone' in ros.status['message']
+    # the graph check (every 0.5 s) or the detector (the still arm never took the path: a
+    # gap past three times the ceiling) stops it first, whichever comes first; nothing learned
+    assert ros.status['state'] == 'stopped', ros.status
+    assert 'controller is gone' in ros.status['message'] or \
+        'nothing executes the commands' in ros.status['message'], ros.status
+    assert ros.status['failures'] == 0
 
 
 def test_a_foreign_command_on_the_trajectory_topic_stops_the_run_and_learns_nothing(
