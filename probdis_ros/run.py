@@ -88,7 +88,8 @@ EXTRAPOLATE = 0.05
 #: follow it (with its position within d_dist).
 FOLLOWING_SPEED = 0.5
 #: An arm at rest between commands that goes further than this x d_dist (L1) both from
-#: where it came to rest and from where the last command holds it is moved by something else.
+#: where it came to rest and from where the last command holds it is moved by something else
+#: (after a block, plus the gap it pressed with: it may settle by that much).
 UNCOMMANDED = 1.5
 
 
@@ -234,6 +235,7 @@ class Run:
         self.retreat_sent = 0.0
         self.retreat_done_at: float | None = None
         self.rest_at: np.ndarray | None = None           # where the arm came to rest
+        self.rest_slack = 0.0      # how far it may still settle from there [rad L1]
         self.pressed = False                             # the last motion ended blocked
         self.latencies: list[float] = []
         self.outcome = ''
@@ -262,7 +264,7 @@ class Run:
             return
         self.measured = np.clip(np.asarray(config, dtype=float), self.arm.lower, self.arm.upper)
         self.measured_at, self.measured_velocity = now, velocity
-        self.rest_at = self.measured.copy()
+        self.rest_at, self.rest_slack = self.measured.copy(), 0.0
         if np.linalg.norm(self.measured - self.loop.goal) <= self.loop.goal_tolerance:
             self.finish(State.SUCCEEDED, 'already at the goal: nothing to do')
             return
@@ -302,6 +304,10 @@ class Run:
         detector, self.detector = self.detector, None
         self.rest_at = self.measured.copy()
         self.pressed = verdict is Verdict.BLOCKED
+        # a compliant arm stopped while pressed into something springs back or slides by up
+        # to the gap it pressed with (seen on the physics mock: 0.17 rad after a blocked
+        # retreat): that settling is no motion of another driver
+        self.rest_slack = detector.gap if self.pressed else 0.0
         if verdict is Verdict.ECHO:
             self.finish(State.STOPPED, ECHO_MESSAGE)
         elif verdict is Verdict.NOT_EXECUTED:
@@ -323,7 +329,7 @@ class Run:
         """Stop when the arm, at rest between commands, moves away on its own."""
         if self.rest_at is None:
             return
-        limit = UNCOMMANDED * self.settings.detection.d_dist
+        limit = UNCOMMANDED * self.settings.detection.d_dist + self.rest_slack
         away = float(np.abs(self.measured - self.rest_at).sum())
         if self.trajectory is not None:       # or where the last command holds it
             held = self.trajectory.sample(np.inf)[0]

@@ -202,6 +202,31 @@ def test_an_arm_moving_while_it_should_rest_stops_the_run_and_learns_nothing():
     assert t < 0.2 / 0.3 and not learned(run)
 
 
+def test_an_arm_settling_after_a_blocked_retreat_is_no_foreign_motion():
+    # pressed into something, then stopped, a compliant arm springs back or slides by up to
+    # the gap it pressed with (0.17 rad seen on the physics mock): the run goes on
+    run = run_from()
+    run.on_plan(run.loop.next_path(Q0))
+    jtc, settings = run.trajectory, run.settings.detection
+    arm = follows(jtc, settings, blocked_at=0.6)
+    t = 0.0
+    while run.phase.value != 'retreating' and t < 5.0:
+        t += 0.01
+        run.on_joint_state(t, arm(t))
+    held = arm(t)
+    while run.detector is not None and t < 10.0:     # the retreat is blocked too
+        t += 0.01
+        run.on_joint_state(t, held)
+    assert run.active and run.detector is None and run.rest_slack > 0.1
+    step = np.array([0.2, 0, 0, 0, 0, 0, 0])
+    for k in range(1, 21):                           # 0.2 rad (L1) of settling
+        run.on_joint_state(t + 0.01 * k, held + step * k / 20)
+    assert run.active, run.message
+    for k in range(1, 41):                           # but 0.8 rad more is someone else's
+        run.on_joint_state(t + 0.2 + 0.01 * k, held + step + 4 * step * k / 40)
+    assert run.outcome == 'stopped' and 'while at rest between commands' in run.message
+
+
 def test_an_arm_still_running_the_last_command_at_a_new_start_is_no_foreign_motion():
     # the previous run's last command still takes the arm 0.3 rad (L1) on to its end
     end = Q0 + np.array([0.3, 0, 0, 0, 0, 0, 0])
