@@ -225,7 +225,11 @@ class PlannerNode(Node):
             raise ValueError('joint_names must name 7 joints')
         if problem:
             self.get_logger().warning(f'goal parameter: {problem}; ~/start will refuse')
-        self.planner = self._make_planner()   # loads the compiled kernels now, not at ~/start
+        # compile (or load) every kernel a run calls now, not at ~/start or at the first block,
+        # where it would hold the executor for seconds while the retreat must be watched
+        # (short plans do: the anytime budget only repeats the same kernels)
+        compiling = time.perf_counter()
+        warm_planner = self._make_planner(longest_plan=0.05)
         namesake = self._namesake()
         if namesake:                      # in this process: the graph is complete at once
             Node.destroy_node(self)
@@ -234,12 +238,9 @@ class PlannerNode(Node):
         self.map_error = ''                    # set by the I/O thread
         self.map_writable = True
         self.fmap = self._load_map()
-        # compile (or load) every kernel a run calls now: at the first block it would hold the
-        # executor for seconds while the retreat must be watched (short plans do: the
-        # anytime budget only repeats the same kernels)
-        seconds = warm_up(self.arm, self._make_planner(longest_plan=0.05),
-                          float(self.get_parameter('c_fail').value))
-        self.get_logger().info(f'planner kernels ready in {seconds:.1f} s')
+        warm_up(self.arm, warm_planner, float(self.get_parameter('c_fail').value))
+        self.get_logger().info(
+            f'planner kernels ready in {time.perf_counter() - compiling:.1f} s')
         self.state_check = StateCheck(self.joint_names, self.arm.lower, self.arm.upper,
                                       self.arm.velocity_limits,
                                       late=self.get_parameter('state_timeout').value)
