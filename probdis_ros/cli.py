@@ -192,29 +192,66 @@ def _detection_overrides(items: list[str]) -> dict[str, float]:
     return out
 
 
+def _families(text: str) -> list[str]:
+    """Return the families of ``--family`` (comma-separated, or all); refuse unknown ones."""
+    from probdis_ros.sim.families import FAMILIES
+
+    families = list(FAMILIES) if text == 'all' else _split(text)
+    unknown = [f for f in families if f not in FAMILIES]
+    if unknown or not families:
+        raise UsageError(f'unknown family {(unknown or [text])[0]!r}; choose from '
+                         f'{", ".join(FAMILIES)} or all')
+    return families
+
+
+def _robot_worlds(args: argparse.Namespace) -> tuple[list[str], dict[str, list[str]] | None]:
+    """Return the robot experiment's scenes (or scenarios) and, for families, their groups."""
+    from probdis_ros.physics.family_scenes import family_scene_name
+    from probdis_ros.physics.scene import scene_path
+    from probdis_ros.resources import scenario_path
+
+    physics = args.engine == 'physics'
+    if args.family is None:
+        if args.worlds is not None or args.seed is not None:
+            raise UsageError('--worlds and --seed choose the worlds of --family')
+        scenarios = _split(args.scenarios or 'robot_waste,robot_maze,robot_bunny')
+        missing = [s for s in scenarios
+                   if not (scene_path(s) if physics else scenario_path(s)).is_file()]
+        if missing:
+            kind = 'scene' if physics else 'scenario'
+            raise UsageError(f'no {kind} file {missing[0]!r} (a path, or a name in '
+                             f'config/{kind}s/)')
+        return scenarios, None
+    if args.scenarios is not None:
+        raise UsageError('give --scenarios or --family, not both')
+    if not physics:
+        raise UsageError('--family runs the families as physical scenes (--engine physics)')
+    families = _families(args.family)
+    worlds = 5 if args.worlds is None else args.worlds
+    seed = 0 if args.seed is None else args.seed
+    if worlds < 1 or seed < 0:
+        raise UsageError('--worlds must be positive and --seed not negative')
+    groups = {f: [family_scene_name(f, seed + w) for w in range(worlds)] for f in families}
+    # world by world across the families, so that a partial run has as many of each
+    return [groups[f][w] for w in range(worlds) for f in families], groups
+
+
 def cmd_experiment_robot(args: argparse.Namespace) -> int:
     """Run the robot scenarios through the ROS nodes against the mock iiwa (Table I)."""
-    from probdis_ros.physics.scene import scene_path
     from probdis_ros.planning.methods import Method
-    from probdis_ros.resources import scenario_path
     from probdis_ros.ros.robot_experiment import robot_table, run_robot_experiment
 
-    scenarios = _split(args.scenarios)
+    scenarios, groups = _robot_worlds(args)
     physics = args.engine == 'physics'
-    missing = [s for s in scenarios
-               if not (scene_path(s) if physics else scenario_path(s)).is_file()]
-    if missing:
-        kind = 'scene' if physics else 'scenario'
-        raise UsageError(f'no {kind} file {missing[0]!r} (a path, or a name in '
-                         f'config/{kind}s/)')
     methods = [Method.parse(m) for m in _split(args.methods)]
-    if args.runs < 1 or not 0 < args.velocity_scaling <= 1:
+    runs = args.runs if args.runs is not None else (10 if groups is None else 1)
+    if runs < 1 or not 0 < args.velocity_scaling <= 1:
         raise UsageError('--runs must be positive and --velocity-scaling in (0, 1]')
     if args.offline and not physics:
         raise UsageError('--offline runs the physics scenes (--engine physics)')
     detection = _detection_overrides(args.detection)
     say = None if args.json else (lambda line: print(line, file=sys.stderr, flush=True))
-    records = run_robot_experiment(Path(args.out), scenarios, methods, args.runs,
+    records = run_robot_experiment(Path(args.out), scenarios, methods, runs,
                                    args.velocity_scaling, args.timeout, say,
                                    engine=args.engine, sim_time=args.sim_time,
                                    real_time_factor=args.real_time_factor,
@@ -224,7 +261,7 @@ def cmd_experiment_robot(args: argparse.Namespace) -> int:
     if args.json:
         _print_json(records)
     else:
-        print(robot_table(records, scenarios, [str(m) for m in methods]), end='')
+        print(robot_table(records, scenarios, [str(m) for m in methods], groups), end='')
         print(f'runs and bags in {args.out}')
     return 0
 
@@ -311,11 +348,22 @@ def _sim_physics(args: argparse.Namespace) -> int:
     from probdis_ros.physics.picture import plot_scene_run
     from probdis_ros.planning import Method
 
-    if args.scenario or args.setting or args.family:
-        raise UsageError('--engine physics runs a --scene, not a --scenario, --setting or '
-                         '--family (the families are kinematic worlds)')
+    if args.scenario or args.setting:
+        raise UsageError('--engine physics runs a --scene or a --family, not a --scenario '
+                         'or --setting')
+    scene = args.scene or 'demo_hook'
+    if args.family:
+        from probdis_ros.physics.family_scenes import draw_family_scene
+        from probdis_ros.sim.families import FAMILIES
+
+        if args.scene:
+            raise UsageError('give --scene or --family, not both')
+        if args.family not in FAMILIES:
+            raise UsageError(f'unknown family {args.family!r}; choose from '
+                             f'{", ".join(FAMILIES)}')
+        scene = draw_family_scene(args.family, args.seed or 0)
     method = Method.resolve(args.method, args.threshold, args.epsilon)
-    episode = run_physics_episode(args.scene, method, seed=args.seed or 0,
+    episode = run_physics_episode(scene, method, seed=args.seed or 0,
                                   max_paths=args.max_paths)
     if args.plot:
         arm = iiwa_arm()
@@ -658,7 +706,8 @@ def build_parser() -> argparse.ArgumentParser:
                      'config/scenarios/')
     sim.add_argument('--family', help='an entanglement family (open_box, closed_box, '
                      'plate_hole, hook_bar, clutter): the world of --seed, as the family '
-                     'sweeps draw it (README "Entanglement families")')
+                     'sweeps draw it (README "Entanglement families"); with --engine physics '
+                     'as a physical scene')
     sim.add_argument('--max-paths', type=_positive_int, default=20, help='N_ITER')
     sim.add_argument('--c-fail', type=float, default=DEFAULT_C_FAIL,
                      help='C_FAIL of the failure map [1/m^2] (probabilistic:C overrides it)')
@@ -667,9 +716,9 @@ def build_parser() -> argparse.ArgumentParser:
                      'scene with the flange path and the failures)')
     sim.add_argument('--engine', choices=('kinematic', 'physics'), default='kinematic',
                      help="the simulated arm: the kinematic one of the paper's settings, or "
-                     'MuJoCo in joint impedance through JTC (with --scene)')
-    sim.add_argument('--scene', default='demo_hook', help='with --engine physics: a scene '
-                     'file, or the name of one in config/scenes/')
+                     'MuJoCo in joint impedance through JTC (with --scene or --family)')
+    sim.add_argument('--scene', help='with --engine physics: a scene file, or the name of one '
+                     'in config/scenes/ (default demo_hook)')
     sim.set_defaults(handler=cmd_sim)
 
     for name, text in (('planner', 'run the planner node (ROS arguments pass through)'),
@@ -771,11 +820,17 @@ def build_parser() -> argparse.ArgumentParser:
     report.set_defaults(handler=cmd_experiment_report)
     robot = exp_sub.add_parser('robot', help='the robot scenarios through the ROS nodes '
                                "against the mock iiwa, like the paper's Table I")
-    robot.add_argument('--runs', type=int, default=10, help='runs per scenario and method '
-                       '(run r uses planner seed r)')
-    robot.add_argument('--scenarios', default='robot_waste,robot_maze,robot_bunny',
-                       help='comma-separated scene files or names (config/scenes/; '
-                       'config/scenarios/ with --engine kinematic)')
+    robot.add_argument('--runs', type=int, help='runs per scenario and method (run r uses '
+                       'planner seed r; default 10, with --family 1 per world)')
+    robot.add_argument('--scenarios', help='comma-separated scene files or names '
+                       '(config/scenes/; config/scenarios/ with --engine kinematic; default '
+                       'robot_waste,robot_maze,robot_bunny)')
+    robot.add_argument('--family', help='comma-separated entanglement families (open_box, '
+                       'closed_box, plate_hole, hook_bar, clutter; all) instead of '
+                       '--scenarios: their worlds of seeds SEED..SEED+WORLDS-1 as physical '
+                       'scenes')
+    robot.add_argument('--worlds', type=int, help='with --family: worlds per family (5)')
+    robot.add_argument('--seed', type=int, help='with --family: the first world seed (0)')
     robot.add_argument('--engine', choices=('physics', 'kinematic'), default='physics',
                        help='the mock arm: MuJoCo in joint impedance, or the idealised one')
     robot.add_argument('--sim-time', action=argparse.BooleanOptionalAction, default=True,

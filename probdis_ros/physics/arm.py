@@ -20,6 +20,12 @@ The iiwa in KUKA's joint impedance control, simulated with MuJoCo.
 :mod:`probdis_ros.physics.model`), so :meth:`PhysicsIiwa.advance` is one call of
 ``mj_step(model, data, n)`` per damping update (10 ms), not a Python loop per step.  What the
 real arm's setpoint goes through before (JTC, the driver's filter) is the caller's business.
+
+Gated obstacles (:class:`~probdis_ros.physics.scene.Gate`) are opened and closed every 10 ms
+for the flange orientation then: solid while the object is held within the gate's tolerance,
+open to an object turned further.  A gate that would close while the object is inside the
+obstacle (it entered turned, then turned back) stays open until the object is out of it, so
+the simulation never finds the object buried in a wall it could not have entered.
 """
 
 from __future__ import annotations
@@ -28,7 +34,13 @@ from dataclasses import dataclass
 
 import mujoco
 import numpy as np
-from probdis_ros.physics.model import build_model, FLANGE, ROBOT_CONTYPE
+from probdis_ros.physics.model import (
+    build_model,
+    FLANGE,
+    OBJECT_BODY,
+    obstacle_name,
+    ROBOT_CONTYPE,
+)
 from probdis_ros.physics.scene import Scene
 from probdis_ros.physics.settings import PhysicsSettings
 
@@ -75,9 +87,10 @@ class PhysicsIiwa:
         self._vadr = np.array([m.jnt_dofadr[j] for j in joints])
         self._mdiag = (m.M_rowadr + m.M_rownnz - 1)[self._vadr]
         self._stiffness = np.asarray(self.settings.stiffness, dtype=float)
-        robot = m.geom_contype == ROBOT_CONTYPE
+        robot = (m.geom_contype & ROBOT_CONTYPE) != 0
         self._robot_geom = robot
         self._scene_geom = (m.geom_conaffinity > 0) & ~robot
+        self._init_gates()
         self.lower = m.jnt_range[joints, 0].copy()
         self.upper = m.jnt_range[joints, 1].copy()
         self.effort = m.jnt_actfrcrange[joints, 1].copy()
@@ -147,6 +160,7 @@ class PhysicsIiwa:
         self._steps_done = 0
         self._time_target = 0.0
         self._update_damping()
+        self._update_gates(follow=False)
         mujoco.mj_forward(self.model, self.data)
 
     def advance(self, setpoint: np.ndarray, duration: float) -> None:
@@ -165,6 +179,7 @@ class PhysicsIiwa:
         while steps > 0:
             n = min(steps, self._chunk)
             self._update_damping()
+            self._update_gates()
             mujoco.mj_step(self.model, self.data, n)
             self._steps_done += n
             steps -= n
@@ -179,6 +194,45 @@ class PhysicsIiwa:
         inertia = d.M[self._mdiag]
         damping = 2.0 * self.settings.damping_ratio * np.sqrt(self._stiffness * inertia)
         m.actuator_biasprm[:, 2] = -damping
+
+    # -- gates -------------------------------------------------------------------------------
+
+    def _init_gates(self) -> None:
+        m, scene = self.model, self.scene
+        gated = [] if scene is None else [
+            (m.geom(obstacle_name(scene, i)).id, o.gate)
+            for i, o in enumerate(scene.obstacles) if o.gate is not None]
+        self._gate_geom = np.array([g for g, _ in gated], dtype=int)
+        self._gate_quat = np.array([gate.orientation for _, gate in gated]).reshape(-1, 4)
+        self._gate_tolerance = np.array([gate.tolerance for _, gate in gated])
+        self._gate_affinity = m.geom_conaffinity[self._gate_geom].copy()
+        body = m.body(OBJECT_BODY).id if scene is not None and scene.grasped else -1
+        self._object_geoms = np.flatnonzero(m.geom_bodyid == body)
+
+    def gates_solid(self, data: mujoco.MjData | None = None) -> np.ndarray:
+        """Return, per gated obstacle, whether it blocks the object as the flange is held."""
+        d = self.data if data is None else data
+        quat = np.empty(4)
+        mujoco.mju_mat2Quat(quat, d.site_xmat[self._flange])
+        dots = np.clip(np.abs(self._gate_quat @ quat), 0.0, 1.0)
+        return (2.0 / np.pi) * np.arccos(dots) < self._gate_tolerance
+
+    def _update_gates(self, follow: bool = True) -> None:
+        """Open or close the gated obstacles for the orientation now (kinematics current)."""
+        if not len(self._gate_geom):
+            return
+        m = self.model
+        solid = self.gates_solid()
+        if follow:
+            closing = solid & (m.geom_conaffinity[self._gate_geom] == 0)
+            for k in np.flatnonzero(closing):
+                if self._object_inside(int(self._gate_geom[k])):
+                    solid[k] = False     # closes once the object is out of it
+        m.geom_conaffinity[self._gate_geom] = np.where(solid, self._gate_affinity, 0)
+
+    def _object_inside(self, geom: int) -> bool:
+        return any(mujoco.mj_geomDistance(self.model, self.data, geom, int(g), 1e-3, None) < 0
+                   for g in self._object_geoms)
 
     # -- geometry ------------------------------------------------------------------------------
 
@@ -225,11 +279,16 @@ class PhysicsIiwa:
         d.qpos[self._qadr] = np.asarray(q, dtype=float).reshape(7)
         if clearance > 0:
             m.geom_margin[self._scene_geom] = clearance
+        gates = m.geom_conaffinity[self._gate_geom].copy()
         try:
             mujoco.mj_kinematics(m, d)
+            if len(self._gate_geom):     # the gates as the object is held at q
+                m.geom_conaffinity[self._gate_geom] = np.where(
+                    self.gates_solid(d), self._gate_affinity, 0)
             mujoco.mj_collision(m, d)
         finally:
             if clearance > 0:
                 m.geom_margin[self._scene_geom] = 0.0
+            m.geom_conaffinity[self._gate_geom] = gates
         idx = self._robot_contacts(d)
         return bool(idx) and bool(np.any(d.contact.dist[idx] < clearance))

@@ -30,7 +30,10 @@ The impedance controller lives in the model, so that many physics steps run in C
   controller's assumed share of the real mass, which models a load-data error.
 
 Collision filter: robot and object geoms (contype 1, conaffinity 0) collide only with scene
-geoms (contype 0, conaffinity 1); no self-collision and no clutter-on-clutter contacts.
+geoms (contype 0, conaffinity 1); no self-collision and no clutter-on-clutter contacts.  The
+object's geoms also carry contype 2, and a scene with ``object_only`` gives its obstacles
+conaffinity 2: they touch the object alone, the arm's links pass through them.  A gated
+obstacle's conaffinity is set to 0 while it is open (:mod:`probdis_ros.physics.arm`).
 """
 
 from __future__ import annotations
@@ -47,6 +50,7 @@ from probdis_ros.physics.settings import PhysicsSettings
 FLANGE = 'lbr_link_ee'
 OBJECT_BODY = 'grasped_object'
 ROBOT_CONTYPE, SCENE_CONAFFINITY = 1, 1
+OBJECT_CONTYPE = 2     # the grasped object's own bit, for scenes whose obstacles touch it alone
 
 
 @dataclass(frozen=True)
@@ -230,7 +234,8 @@ def _object_body(scene: Scene, gravcomp: float) -> list[str]:
         name = shape.name or f'object/{i}'
         lines.append(f'  <geom name="{name}" {_geom_attrs(shape)} '
                      f'mass="{_f(grasped.mass * shape.volume / volume)}" '
-                     f'contype="{ROBOT_CONTYPE}" conaffinity="0" rgba="0.2 0.4 0.9 1"/>')
+                     f'contype="{ROBOT_CONTYPE | OBJECT_CONTYPE}" conaffinity="0" '
+                     'rgba="0.2 0.4 0.9 1"/>')
     lines.append('</body>')
     return lines
 
@@ -242,10 +247,11 @@ def obstacle_name(scene: Scene, index: int) -> str:
 
 def _scene_bodies(scene: Scene, settings: PhysicsSettings) -> list[str]:
     lines = []
+    affinity = OBJECT_CONTYPE if scene.object_only else SCENE_CONAFFINITY
     for i, obstacle in enumerate(scene.obstacles):
         shape, name = obstacle.shape, obstacle_name(scene, i)
         geom = (f'{_geom_attrs(Primitive(shape.kind, shape.size, np.zeros(3)))} '
-                f'contype="0" conaffinity="{SCENE_CONAFFINITY}" '
+                f'contype="0" conaffinity="{affinity}" '
                 f'friction="{_f(settings.friction)} 0.005 0.0001"')
         if obstacle.hinge is None:
             lines.append(f'<body name="{name}" pos="{_f(shape.position)}" '

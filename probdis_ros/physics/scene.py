@@ -36,6 +36,9 @@ the base frame ``lbr_link_0`` (the world) unless said otherwise::
         - {type: sphere, radius: 0.05, position: [...],
            hinge: {point: [x, y, z], axis: [ax, ay, az], stiffness: 5.0, damping: 0.2},
            mass: 0.3}
+        - {type: box, size: [0.2, 0.2, 0.01], position: [...],
+           gate: {orientation: [w, x, y, z], tolerance: 0.4}}
+    object_only: false               # optional; true: obstacles touch the object alone
 
 Primitives: ``box`` (``size``: full edge lengths x, y, z), ``capsule`` and ``cylinder``
 (``radius``, ``length`` along the local z axis; a capsule's length is between the centres of
@@ -44,8 +47,15 @@ y, z) or ``quaternion`` (w, x, y, z), not both; neither means unrotated.  An obs
 unless it has a ``hinge``: then it turns about the axis through ``point`` (base frame) on a
 torsional spring of ``stiffness`` Nm/rad (rest: its pose in the file) with ``damping``
 Nms/rad, so clutter gives way to a push; its own weight is carried by the hinge (it does not
-sag) and ``mass`` (kg, default 0.3) sets its inertia.  An optional ``name`` on a primitive
-names it in contacts.  Any problem raises :class:`SceneError` naming the file and the entry.
+sag) and ``mass`` (kg, default 0.3) sets its inertia.  With a ``gate`` an obstacle is solid
+only to an object held like ``orientation`` (the flange quaternion, w x y z): while
+``D_ORIENT = (2 / pi) arccos(|q_flange . orientation|)`` is below ``tolerance``; to an object
+turned further it is open (the kinematic worlds' orientation-gated obstacles, carried over
+as a rule of the simulation, not as a shape: :mod:`probdis_ros.physics.family_scenes`).
+``object_only: true`` lets the arm's links pass through every obstacle, so that only the
+grasped object touches the scene (the kinematic worlds model the flange alone).  An
+optional ``name`` on a primitive names it in contacts.  Any problem raises
+:class:`SceneError` naming the file and the entry.
 """
 
 from __future__ import annotations
@@ -61,7 +71,7 @@ PRIMITIVES = {'box': ('size',), 'capsule': ('radius', 'length'),
               'cylinder': ('radius', 'length'), 'sphere': ('radius',)}
 DEFAULT_HINGED_MASS = 0.3
 _POSE_KEYS = {'type', 'name', 'position', 'rpy', 'quaternion', 'size', 'radius', 'length'}
-_TOP_KEYS = {'name', 'description', 'start', 'goal', 'object', 'obstacles'}
+_TOP_KEYS = {'name', 'description', 'start', 'goal', 'object', 'obstacles', 'object_only'}
 
 
 class SceneError(ValueError):
@@ -123,12 +133,26 @@ class Hinge:
 
 
 @dataclass(frozen=True)
+class Gate:
+    """An obstacle solid only to an object held within ``tolerance`` (D_ORIENT) of this."""
+
+    orientation: np.ndarray      # unit quaternion (w, x, y, z) of the flange
+    tolerance: float
+
+    def solid(self, quat: np.ndarray) -> bool:
+        """Tell whether the obstacle blocks an object held at flange quaternion quat."""
+        dot = min(1.0, abs(float(np.dot(quat, self.orientation))))
+        return (2.0 / np.pi) * float(np.arccos(dot)) < self.tolerance
+
+
+@dataclass(frozen=True)
 class SceneObstacle:
-    """A primitive in the base frame, rigid (hinge None) or on a spring hinge."""
+    """A primitive in the base frame, rigid (hinge None) or on a spring hinge; maybe gated."""
 
     shape: Primitive
     hinge: Hinge | None = None
     mass: float = DEFAULT_HINGED_MASS
+    gate: Gate | None = None
 
 
 @dataclass(frozen=True)
@@ -150,6 +174,7 @@ class Scene:
     grasped: GraspedObject | None = None
     description: str = ''
     source: str = ''
+    object_only: bool = False
 
 
 # -- parsing ---------------------------------------------------------------------------------
@@ -232,15 +257,31 @@ def _hinge(entry: object) -> Hinge:
                  _scalar(entry, 'damping', 'hinge', minimum=0.0, strict=False))
 
 
+def _gate(entry: object) -> Gate:
+    if not isinstance(entry, dict):
+        raise SceneError('gate must be a mapping with orientation and tolerance')
+    unknown = set(entry) - {'orientation', 'tolerance'}
+    if unknown:
+        raise SceneError(f'gate: unknown keys {", ".join(sorted(map(str, unknown)))}')
+    quat = _numbers(entry.get('orientation'), 4, 'gate needs orientation (w, x, y, z)')
+    if np.linalg.norm(quat) < 1e-9:
+        raise SceneError('gate: orientation must not be zero')
+    tolerance = _scalar(entry, 'tolerance', 'gate')
+    if tolerance > 1:
+        raise SceneError(f'gate needs tolerance at most 1 (D_ORIENT), got {tolerance:g}')
+    return Gate(quat / np.linalg.norm(quat), tolerance)
+
+
 def _obstacle(entry: object) -> SceneObstacle:
-    shape = _primitive(entry, {'hinge', 'mass'})
+    shape = _primitive(entry, {'hinge', 'mass', 'gate'})
     assert isinstance(entry, dict)
+    gate = _gate(entry['gate']) if 'gate' in entry else None
     if 'hinge' not in entry:
         if 'mass' in entry:
             raise SceneError(f'{shape.kind}: mass is only for an obstacle with a hinge')
-        return SceneObstacle(shape)
+        return SceneObstacle(shape, gate=gate)
     return SceneObstacle(shape, _hinge(entry['hinge']),
-                         _scalar(entry, 'mass', shape.kind, default=DEFAULT_HINGED_MASS))
+                         _scalar(entry, 'mass', shape.kind, default=DEFAULT_HINGED_MASS), gate)
 
 
 def _grasped(entry: object) -> GraspedObject:
@@ -296,8 +337,11 @@ def scene_from_dict(doc: object, name: str = '', source: str = '') -> Scene:
             obstacles.append(_obstacle(entry))
         except SceneError as err:
             raise SceneError(f'obstacles[{i}]: {err}') from None
+    object_only = doc.get('object_only', False)
+    if not isinstance(object_only, bool):
+        raise SceneError(f'object_only must be true or false, got {object_only!r}')
     return Scene(str(doc.get('name', name)), start, goal, tuple(obstacles), grasped,
-                 str(doc.get('description', '')), source)
+                 str(doc.get('description', '')), source, object_only)
 
 
 def scene_path(name: str | Path) -> Path:
@@ -315,8 +359,19 @@ def shipped_scenes() -> list[str]:
 
 
 def load_scene(name: str | Path) -> Scene:
-    """Read a scene file (a path or a shipped name); any problem raises SceneError."""
+    """
+    Read a scene file (a path or a shipped name); any problem raises SceneError.
+
+    A name like ``closed_box-seed3`` that is no file is the entanglement family world of
+    that seed, drawn and made physical (:mod:`probdis_ros.physics.family_scenes`).
+    """
     path = scene_path(name)
+    if not path.exists():
+        from probdis_ros.physics.family_scenes import draw_family_scene, parse_family_scene
+
+        family = parse_family_scene(name)
+        if family is not None:
+            return draw_family_scene(*family)
     try:
         doc = yaml.safe_load(path.read_text())
     except OSError as err:

@@ -189,12 +189,14 @@ def run_robot_experiment(out: Path, scenarios: list[str], methods: list[Method],
     return records
 
 
-def robot_table(records: list[dict], scenarios: list[str], methods: list[str]) -> str:
+def robot_table(records: list[dict], scenarios: list[str], methods: list[str],
+                groups: dict[str, list[str]] | None = None) -> str:
     """
     Return Table I as Markdown: successes per scenario and method, totals, mean paths.
 
     Mean paths are over the successful runs of a method, as in the paper.  Runs that did not
     keep the real arm's timing (:func:`valid`) are left out and counted below the table.
+    With ``groups`` (a row's name: its scenarios, e.g. a family's worlds) a row sums a group.
     """
     kept = [r for r in records if valid(r)]
     runs = {(r['scenario'], r['method'], r.get('run')) for r in kept}
@@ -202,13 +204,16 @@ def robot_table(records: list[dict], scenarios: list[str], methods: list[str]) -
                 if not valid(r)} - runs
     records = kept
 
-    def cell(scenario: str | None, method: str) -> list[dict]:
-        return [r for r in records if r['method'] == method and
-                (scenario is None or r['scenario'] == scenario)]
+    label = 'scenario' if groups is None else 'family'
+    groups = groups or {s: [s] for s in scenarios}
 
-    lines = ['| scenario | ' + ' | '.join(methods) + ' |',
+    def cell(row: str | None, method: str) -> list[dict]:
+        return [r for r in records if r['method'] == method and
+                (row is None or r['scenario'] in groups[row])]
+
+    lines = [f'| {label} | ' + ' | '.join(methods) + ' |',
              '| --- |' + ' --- |' * len(methods)]
-    for scenario in [*scenarios, None]:
+    for scenario in [*groups, None]:
         counts = []
         for method in methods:
             group = cell(scenario, method)
