@@ -20,6 +20,13 @@ from probdis_ros.model.arms import TaskPoints
 from probdis_ros.model.informed_map import InformedMap, MapIdeas
 from probdis_ros.planning import Disentangler, Method, RRTSettings
 from probdis_ros.planning.informed import BUDGET_FACTOR, DEFAULT_IDEAS, InformedDisentangler
+from probdis_ros.planning.prob_rrt import ProbRRT
+from probdis_ros.planning.probes import (
+    even_directions,
+    probe_chains,
+    ProbeRRT,
+    ProbeSettings,
+)
 import pytest
 
 IDENTITY = np.array([1.0, 0.0, 0.0, 0.0])
@@ -58,7 +65,8 @@ def test_informed_parses_its_ideas(text, ideas, shown):
 
 
 @pytest.mark.parametrize('text', ['informed:x', 'informed:aa', 'informed:a:3',
-                                  'informed:d', 'informed:1'])
+                                  'informed:h', 'informed:g', 'informed:eg',
+                                  'informed:1'])
 def test_informed_refuses_unknown_ideas(text):
     with pytest.raises(ValueError, match='informed'):
         Method.parse(text)
@@ -219,6 +227,109 @@ def test_idea_e_widens_the_map_when_failures_repeat():
     for k in range(30):
         fmap.add([0.0, 0.001 * k, 0.0], PUSH, IDENTITY)
     assert fmap.c_fail == MapIdeas().c_fail_min
+
+
+# -- ideas d and f: straight probes around the start, turning first with f ------------------
+
+# an iiwa configuration with room to move (its flange ~0.5 m out, 0.5 m up)
+IIWA_START = np.array([0.3, 0.6, -0.2, -1.4, 0.2, 0.9, 0.1])
+
+
+def test_idea_d_probes_follow_straight_lines_from_the_start():
+    arm = arm_for_setting('3d-orient')
+    settings = ProbeSettings()
+    directions = even_directions(12, 3)
+    np.testing.assert_allclose(np.linalg.norm(directions, axis=1), 1.0)
+    chains = probe_chains(arm, IIWA_START, directions, settings)
+    x0 = arm.positions(IIWA_START)[0]
+    long = 0
+    for direction, chain in zip(directions, chains):
+        if not len(chain):
+            continue
+        offsets = arm.positions(chain) - x0
+        along = offsets @ direction
+        aside = np.linalg.norm(offsets - np.outer(along, direction), axis=1)
+        assert aside.max() < settings.tolerance
+        assert np.all(np.diff(along) > 0) and along[-1] <= settings.length + settings.tolerance
+        assert np.all(np.linalg.norm(np.diff(np.vstack([IIWA_START, chain]), axis=0),
+                                     axis=1) <= settings.joint_step + 0.1)
+        long += along[-1] > 0.3
+    assert long >= 6
+
+
+def test_idea_f_probes_turn_in_place_then_go_straight():
+    arm = arm_for_setting('3d-orient')
+    directions = even_directions(8, 3)
+    axes = np.roll(directions, 1, axis=1)
+    chains = probe_chains(arm, IIWA_START, directions, ProbeSettings(), axes=axes)
+    start = arm.fk(IIWA_START)
+    turned = 0
+    for chain in chains:
+        if not len(chain):
+            continue
+        pose = arm.fk(chain)
+        turn = 2 * np.arccos(np.clip(np.abs(pose.orientations @ start.orientations[0]), 0, 1))
+        away = np.linalg.norm(pose.positions - start.positions[0], axis=1)
+        # it turns where it stands, then goes without turning back
+        standing = away < 0.01
+        assert standing[0] and np.all(np.diff(standing.astype(int)) <= 0)
+        assert np.all(turn[~standing] >= turn[standing].max() - 0.2)
+        turned += turn[-1] > np.pi / 3 and away[-1] > 0.2
+    assert turned >= 3
+
+
+def test_ideas_d_and_f_hang_probes_from_the_start_tree_only():
+    arm = arm_for_setting('3d-orient')
+    settings = RRTSettings(iterations=5, n_random=5)
+    assert type(Method.parse('probabilistic').planner(arm, settings)) is ProbRRT
+    assert type(Method.parse('informed:a').planner(arm, settings)) is ProbRRT
+    sizes = {}
+    for ideas in ('d', 'f', 'df'):
+        planner = Method.parse(f'informed:{ideas}').planner(arm, settings)
+        assert isinstance(planner, ProbeRRT)
+        coster = planner.objective.coster(arm, FailureMap(arm.task_space), settings.delta)
+        start, goal = planner.grow(IIWA_START, -0.5 * IIWA_START, coster,
+                                   np.random.default_rng(0))
+        assert goal.size <= 6 < start.size
+        sizes[ideas] = start.size
+        np.testing.assert_array_equal(start.nodes[0], IIWA_START)
+    assert sizes['df'] > max(sizes['d'], sizes['f'])
+
+
+def test_idea_d_offers_a_straight_way_out_in_almost_every_direction():
+    # a start tree of one iteration: what it holds beyond the root are the probes
+    arm = arm_for_setting('3d-orient')
+    settings = RRTSettings(iterations=1, n_random=1)
+    x0 = arm.positions(IIWA_START)[0]
+    asked = even_directions(40, 3) @ np.array([[0.0, 0.6, 0.8], [1.0, 0.0, 0.0],
+                                              [0.0, 0.8, -0.6]])
+
+    def covered(method: str) -> int:
+        planner = Method.parse(method).planner(arm, settings)
+        coster = planner.objective.coster(arm, FailureMap(arm.task_space), settings.delta)
+        tree, _ = planner.grow(IIWA_START, -0.5 * IIWA_START, coster, np.random.default_rng(1))
+        out = tree.positions[:tree.size] - x0
+        reach = np.linalg.norm(out, axis=1)
+        out = out[reach > 0.2] / reach[reach > 0.2, None]
+        return int(np.sum(np.max(asked @ out.T, axis=1, initial=-1.0) > np.cos(0.4)))
+
+    assert covered('informed:d') >= 30 > 5 >= covered('probabilistic')
+
+
+def test_idea_g_offers_no_probe_toward_a_failure_within_reach():
+    arm = arm_for_setting('3d-orient')
+    planner = Method.parse('informed:dg').planner(arm, RRTSettings(iterations=1, n_random=1))
+    pose = arm.fk(IIWA_START)
+    x0, q0 = pose.positions[0], pose.orientations[0]
+    directions = even_directions(32, 3)
+    ahead = directions[5]
+    fmap = FailureMap(arm.task_space)
+    fmap.add(x0 + 0.1 * ahead, ahead, q0)
+    keep = planner._untried(directions, x0, fmap)
+    assert not keep[5] and keep.sum() >= len(directions) - 3
+    far = FailureMap(arm.task_space)
+    far.add(x0 + 0.6 * ahead, ahead, q0)                    # beyond the probes' reach
+    assert planner._untried(directions, x0, far).all()
 
 
 # -- the method does better than the paper's on family worlds ---------------------------------

@@ -39,7 +39,7 @@ from probdis_ros.planning.informed import (
     DEFAULT_IDEAS,
     informed_loop,
     informed_map,
-    informed_settings,
+    informed_planner,
 )
 from probdis_ros.planning.objectives import (
     DEFAULT_THRESHOLD,
@@ -141,7 +141,8 @@ class Method:
             return EpsilonPlanner(arm, DEFAULT_EPSILON if self.value is None else self.value,
                                   joint_margin=settings.joint_margin if settings else 0.0)
         if self.name == 'informed':
-            settings = informed_settings(self.idea_letters, settings)
+            return informed_planner(self.idea_letters, arm, settings,
+                                    self.objective(length_weight))
         return ProbRRT(arm, settings, self.objective(length_weight))
 
     @property

@@ -1,0 +1,274 @@
+# Copyright 2026 probdis_ros contributors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Ideas d, f and g of the informed method: probes around the start, offered to the start tree.
+
+A random tree leaves the start along joint-space edges of up to a radian, whose end-effector
+traces are long arcs: seen from the start, its ways out of a trap point wherever the arm's
+kinematics happen to send them, and the same few directions come back path after path (in
+training ``plate_hole`` worlds twenty paths never came within 14-63 degrees of the hole's
+direction, while the straight way out through it cost the map 0.26-1.9, as little as any).
+:class:`ProbeRRT` is the paper's ProbRRT whose start tree holds, before it grows, chains of
+nodes along straight task-space lines from the start in ``directions`` directions spread
+evenly over the sphere (a Fibonacci lattice, turned at random per plan with a draw from the
+planner's stream), out to ``length``, a node every ``spacing``.  The map costs every edge
+of them as it costs any other; the tree grows from them as from any node; Connect may join
+the goal tree to any of them.  Nothing forces a probe: a direction that has failed costs
+what the map says, so the cheapest path takes a way out not yet tried, when one is as
+cheap as the rest.  The chains follow the lines by damped least squares on the end
+effector's position (its orientation is left to the null space), and stop where the arm
+cannot follow within its joint limits.
+
+* straight probes (idea d) keep the object about as it was held;
+* turning probes (idea f) first turn it in place by ``turn`` about an axis drawn per probe,
+  then go straight holding that orientation (as far as the joints allow): an obstacle that
+  blocks only the object held as before (a gated wall, a soft item, a hook under its bar)
+  lets such a probe through;
+* untried (idea g): no probe is offered within ``untried`` of the direction of a failure
+  it could reach.
+
+Draws: the lattice's turn, then (turning probes) the axes, both before the tree's own draws
+and from the same stream; the paper's ProbRRT is not touched (this class overrides only
+where the trees are rooted).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+import math
+
+import numpy as np
+from probdis_ros.model.arms import Arm, quaternion_to_rotation
+from probdis_ros.model.edge_costs import EdgeCoster
+from probdis_ros.planning.prob_rrt import ProbRRT
+from probdis_ros.planning.tree import Tree
+
+
+@dataclass(frozen=True)
+class ProbeSettings:
+    """How the start is probed (first choices, not tuned; measured on training worlds)."""
+
+    directions: int = 32        # straight lines from the start, evenly over the sphere
+    length: float = 0.4         # [m] how far each goes (past the far side of a 0.36 m box)
+    spacing: float = 0.05       # [m] between the nodes of a chain, or closer:
+    joint_step: float = 0.15    # [rad] the longest joint-space edge of a chain
+    step: float = 0.01          # [m] of the damped least squares that follow a line
+    tolerance: float = 0.005    # [m] a chain stops where the flange strays farther
+    damping: float = 1e-3
+    turn: float = 0.6 * math.pi     # [rad] turning probes (idea f) first turn this much ...
+    turn_step: float = 0.1          # [rad] ... this much at a time ...
+    turn_weight: float = 0.3        # [m/rad] ... the orientation weighed this against position
+    turn_joint_step: float = 0.3    # [rad] longest joint-space edge while turning in place
+
+
+def even_directions(n: int, dim: int) -> np.ndarray:
+    """Return n unit vectors spread evenly over the circle (dim 2) or the sphere (Fibonacci)."""
+    k = np.arange(n) + 0.5
+    if dim == 2:
+        angle = 2 * math.pi * k / n
+        return np.column_stack([np.cos(angle), np.sin(angle)])
+    z = 1.0 - 2.0 * k / n
+    r = np.sqrt(1.0 - z * z)
+    phi = math.pi * (3.0 - math.sqrt(5.0)) * k
+    return np.column_stack([r * np.cos(phi), r * np.sin(phi), z])
+
+
+def random_turn(rng: np.random.Generator, dim: int) -> np.ndarray:
+    """Return a uniformly random rotation matrix (dim 2 or 3), drawn from rng."""
+    if dim == 2:
+        angle = rng.uniform(0.0, 2 * math.pi)
+        return np.array([[math.cos(angle), -math.sin(angle)], [math.sin(angle), math.cos(angle)]])
+    quat = rng.normal(size=4)
+    return quaternion_to_rotation(quat / np.linalg.norm(quat))[0]
+
+
+def rotations(axes: np.ndarray, angles: np.ndarray | float) -> np.ndarray:
+    """Return the rotation matrices of unit axes ``(n, 3)`` by angles (Rodrigues)."""
+    angles = np.broadcast_to(np.asarray(angles, dtype=float), (len(axes),))
+    k = np.zeros((len(axes), 3, 3))
+    k[:, 0, 1], k[:, 0, 2], k[:, 1, 2] = -axes[:, 2], axes[:, 1], -axes[:, 0]
+    k -= np.transpose(k, (0, 2, 1))
+    sin, cos = np.sin(angles)[:, None, None], np.cos(angles)[:, None, None]
+    return np.eye(3) + sin * k + (1.0 - cos) * (k @ k)
+
+
+def _vee(m: np.ndarray) -> np.ndarray:
+    """Return the axial vectors of the skew parts of matrices ``(..., 3, 3)``."""
+    return 0.5 * np.stack([m[..., 2, 1] - m[..., 1, 2], m[..., 0, 2] - m[..., 2, 0],
+                           m[..., 1, 0] - m[..., 0, 1]], axis=-1)
+
+
+def _log(m: np.ndarray) -> np.ndarray:
+    """Return the rotation vectors of rotation matrices ``(n, 3, 3)``."""
+    angle = np.arccos(np.clip((np.trace(m, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0))
+    sin = np.sin(angle)
+    scale = np.where(sin > 1e-9, angle / np.where(sin > 1e-9, sin, 1.0), 1.0)
+    return _vee(m) * scale[:, None]
+
+
+def probe_chains(arm: Arm, start: np.ndarray, directions: np.ndarray,
+                 settings: ProbeSettings = ProbeSettings(), lower: np.ndarray | None = None,
+                 upper: np.ndarray | None = None, axes: np.ndarray | None = None
+                 ) -> list[np.ndarray]:
+    """
+    Return, per direction, the configurations of a chain along a straight line from start.
+
+    A node every ``spacing`` along the line, or sooner where the joints move more than
+    ``joint_step`` (so that the straight joint-space edges stay near the line); a chain ends
+    before the first node the arm cannot reach within ``tolerance`` (joint limits, or
+    ``lower`` / ``upper`` if given; singularity).  All directions are followed at once.
+    With ``axes`` (one per direction; an arm with orientation), each chain first turns the
+    end effector in place toward ``settings.turn`` about its axis, then follows its line
+    holding that orientation, both as far as the joints allow (the orientation weighs
+    ``turn_weight`` against the position, and only the position must stay within
+    ``tolerance``).
+    """
+    lower = arm.lower if lower is None else lower
+    upper = arm.upper if upper is None else upper
+    n, dim = len(directions), arm.task_space.dim
+    joints = arm.n_joints
+    x0 = arm.positions(start)[0]
+    q = np.tile(start, (n, 1))
+    alive = np.ones(n, dtype=bool)
+    nodes: list[list[np.ndarray]] = [[] for _ in range(n)]
+    steps = round(settings.length / settings.step)
+    every = max(1, round(settings.spacing / settings.step))
+    eps = 1e-6
+    shift = eps * np.eye(joints)
+    turning = axes is not None and settings.turn > 0 and arm.task_space.has_orientation
+    turns = math.ceil(settings.turn / settings.turn_step) if turning else 0
+    if turning:
+        r0 = arm.tip_frames(start)[1][0]
+    for k in range(1, turns + steps + 1):
+        along = max(0, k - turns)
+        target = x0 + directions * (along * settings.step)
+        if turning:
+            aim = rotations(axes, settings.turn * min(1.0, k / turns)) @ r0
+            for _ in range(3):
+                probe = (q[:, None, :] + np.concatenate([np.zeros((1, joints)), shift])[None])
+                pos, rot = arm.tip_frames(probe.reshape(-1, joints))
+                pos, rot = pos.reshape(n, joints + 1, 3), rot.reshape(n, joints + 1, 3, 3)
+                moved = rot[:, 1:] @ np.transpose(rot[:, :1], (0, 1, 3, 2))
+                w = settings.turn_weight
+                jac = np.concatenate([pos[:, 1:] - pos[:, :1], w * _vee(moved)], axis=2)
+                jac = np.transpose(jac, (0, 2, 1)) / eps                        # (n, 6, joints)
+                error = np.concatenate([target - pos[:, 0], w * _log(
+                    aim @ np.transpose(rot[:, 0], (0, 2, 1)))], axis=1)
+                gram = jac @ np.transpose(jac, (0, 2, 1)) + settings.damping * np.eye(6)
+                dq = np.einsum('nij,ni->nj', jac,
+                               np.linalg.solve(gram, error[..., None])[..., 0])
+                q = np.clip(q + dq, lower, upper)
+            strayed = np.linalg.norm(arm.positions(q) - target, axis=1) > settings.tolerance
+        else:
+            for _ in range(2):
+                probe = (q[:, None, :] + np.concatenate([np.zeros((1, joints)), shift])[None])
+                here = arm.positions(probe.reshape(-1, joints)).reshape(n, joints + 1, dim)
+                jac = np.transpose(here[:, 1:] - here[:, :1], (0, 2, 1)) / eps
+                error = target - here[:, 0]
+                gram = jac @ np.transpose(jac, (0, 2, 1)) + settings.damping * np.eye(dim)
+                dq = np.einsum('nij,ni->nj', jac,
+                               np.linalg.solve(gram, error[..., None])[..., 0])
+                q = np.clip(q + dq, lower, upper)
+            strayed = np.linalg.norm(arm.positions(q) - target, axis=1) > settings.tolerance
+        alive &= ~strayed
+        if not alive.any():
+            break
+        last = np.array([chain[-1] if chain else start for chain in nodes])
+        far = np.linalg.norm(q - last, axis=1) > (
+            settings.joint_step if along else settings.turn_joint_step)
+        due = k == turns if along == 0 else along % every == 0
+        for i in np.flatnonzero(alive & (far | due)):
+            nodes[i].append(q[i].copy())
+    return [np.array(chain).reshape(-1, joints) for chain in nodes]
+
+
+def add_chains(tree: Tree, chains: list[np.ndarray], arm: Arm, coster: EdgeCoster) -> int:
+    """Hang each chain from the tree's root, edge by edge, costed; return the nodes added."""
+    added = 0
+    for chain in chains:
+        if not len(chain):
+            continue
+        positions = arm.positions(chain)
+        parent = 0
+        for node, position in zip(chain, positions):
+            edge = float(coster.costs(tree.nodes[parent][None], node, toward=True)[0])
+            if not math.isfinite(edge):
+                break
+            parent = tree.append(node, position, parent, edge, tree.costs[parent] + edge)
+            added += 1
+    return added
+
+
+class ProbeRRT(ProbRRT):
+    """ProbRRT whose start tree begins with probes around the start (ideas d, f, g)."""
+
+    def __init__(self, arm: Arm, settings=None, objective=None,
+                 probes: ProbeSettings | None = None, straight: bool = True,
+                 turning: bool = False, untried: float = 0.0, **kwargs) -> None:
+        if not (straight or turning):
+            raise ValueError('ProbeRRT needs straight or turning probes')
+        self.probes = probes or ProbeSettings()
+        self.straight, self.turning, self.untried = straight, turning, float(untried)
+        self._hang: tuple[EdgeCoster, np.random.Generator] | None = None
+        super().__init__(arm, settings, objective, **kwargs)
+
+    def grow(self, start: np.ndarray, goal: np.ndarray, coster: EdgeCoster,
+             rng: np.random.Generator, t0: float | None = None) -> tuple[Tree, Tree]:
+        """Grow the trees as ProbRRT does, the start tree rooted with the probes."""
+        self._hang = (coster, rng)
+        try:
+            return super().grow(start, goal, coster, rng, t0)
+        finally:
+            self._hang = None
+
+    def _roots(self, start: np.ndarray, goal: np.ndarray, capacity: int) -> tuple[Tree, Tree]:
+        """Root both trees; while growing, hang the probes (turned by a draw) from the start."""
+        if self._hang is None:          # warming up, or connecting
+            return super()._roots(start, goal, capacity)
+        coster, rng = self._hang
+        dim = self.arm.task_space.dim
+        directions = even_directions(self.probes.directions, dim) @ random_turn(rng, dim).T
+        keep = self._untried(directions, self.arm.positions(start)[0], coster.fmap)
+        chains = []
+        turning = self.turning and self.arm.task_space.has_orientation
+        if self.straight or not turning:        # without orientation a turn is no turn
+            chains += probe_chains(self.arm, start, directions[keep], self.probes, self.low,
+                                   self.high)
+        if turning:
+            axes = rng.normal(size=(len(directions), 3))
+            axes /= np.linalg.norm(axes, axis=1, keepdims=True)
+            chains += probe_chains(self.arm, start, directions[keep], self.probes, self.low,
+                                   self.high, axes[keep])
+        trees = super()._roots(start, goal, capacity + sum(len(chain) for chain in chains))
+        add_chains(trees[0], chains, self.arm, coster)
+        return trees
+
+    def _untried(self, directions: np.ndarray, x0: np.ndarray, fmap) -> np.ndarray:
+        """
+        Tell which directions keep a probe (all unless ``untried`` > 0).
+
+        With ``untried`` > 0, those farther than that angle [rad] from the direction of
+        every failure within the probes' reach.
+        """
+        keep = np.ones(len(directions), dtype=bool)
+        if self.untried <= 0 or not len(fmap.points):
+            return keep
+        ahead = fmap.points - x0
+        reach = np.linalg.norm(ahead, axis=1)
+        near = (reach > 1e-9) & (reach <= self.probes.length)
+        if near.any():
+            seen = ahead[near] / reach[near, None]
+            keep = np.max(directions @ seen.T, axis=1) < math.cos(self.untried)
+        return keep
