@@ -41,10 +41,12 @@ def test_an_offline_physics_episode_learns_from_a_block_and_is_reproducible():
 
 def test_probdis_sim_engine_physics_prints_json_and_draws_the_scene(tmp_path):
     picture = tmp_path / 'run.png'
+    # the paper's method meets the hook before it gets out (the default, informed, may turn
+    # the object free at once, with no block to show)
     done = subprocess.run([sys.executable, '-m', 'probdis_ros.cli', 'sim', '--engine', 'physics',
                            '--scene', 'demo_hook', '--seed', '1', '--max-paths', '5', '--json',
-                           '--plot', str(picture)], capture_output=True, text=True, timeout=300,
-                          cwd=ROOT)
+                           '--method', 'probabilistic', '--plot', str(picture)],
+                          capture_output=True, text=True, timeout=300, cwd=ROOT)
     assert done.returncode == 0, done.stderr
     doc = json.loads(done.stdout)
     assert doc['success'] and doc['failures'] >= 1 and doc['peak_contact_force_n'] > 0
