@@ -274,3 +274,23 @@ def test_a_margin_without_room_or_below_zero_is_refused():
         RRTSettings(joint_margin=-0.01)
     with pytest.raises(ValueError, match='no room'):
         ProbRRT(PLANAR, RRTSettings(joint_margin=3.0))
+
+
+def test_a_block_met_while_turning_in_place_is_learned_with_a_direction():
+    """Turning the last joint alone leaves the flange point still: the object's lever moves."""
+    from probdis_ros.planning.disentangle import failure_from_block
+
+    arm = arm_for_setting('3d-orient')
+    config = np.array([0.1, 0.5, 0.2, -1.0, 0.3, 0.8, 0.2])
+    turn = np.zeros(7)
+    turn[6] = 0.5
+    x, v, q = failure_from_block(arm, config, turn)
+    assert np.linalg.norm(v) > 1e-6
+    fmap = FailureMap(arm.task_space)
+    fmap.add(x, v, q)           # refused before: 'a nonzero finite direction'
+    assert len(fmap) == 1
+    # a motion of the flange point itself keeps its own direction, as before
+    step = np.array([0.3, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+    x, v, _ = failure_from_block(arm, config, step)
+    ahead = arm.fk(config[None] + 1e-3 * step / 0.3).positions[0] - x
+    assert np.dot(v, ahead) > 0

@@ -49,12 +49,15 @@ import time
 from typing import Protocol
 
 import numpy as np
-from probdis_ros.model.arms import Arm
+from probdis_ros.model.arms import Arm, quaternion_to_rotation
 from probdis_ros.model.failure_map import FailureMap
 from probdis_ros.planning.seeds import PLANNER, stream
 
 #: Joint-space distance [rad] used to find the task-space direction of a blocked motion.
 DIRECTION_PROBE = 1e-3
+#: [m] how far ahead of the flange a block met while turning in place is taken to act: a
+#: grasped object reaches beyond the flange point, which a pure turn does not move.
+LEVER = 0.1
 #: How far [rad, joint space] a retreat goes back at least, along the way the arm came.
 DEFAULT_MIN_RETREAT = 0.1
 
@@ -71,12 +74,33 @@ def failure_from_block(arm: Arm, config: np.ndarray, joint_direction: np.ndarray
     if norm == 0.0:
         raise ValueError('a blocked motion needs a nonzero joint direction')
     before = config - DIRECTION_PROBE * joint_direction / norm
-    pose = arm.fk(np.array([before, config]))
+    ends = np.array([before, config, config + joint_direction])
+    pose = arm.fk(ends)
     v = pose.positions[1] - pose.positions[0]
     if np.linalg.norm(v) < 1e-12:   # singular configuration: use the whole edge's motion
-        v = arm.fk(config + joint_direction).positions[0] - pose.positions[1]
+        v = pose.positions[2] - pose.positions[1]
     q = None if pose.orientations is None else pose.orientations[1]
+    if np.linalg.norm(v) < 1e-12 and q is not None:
+        v = _turn_direction(pose.orientations, pose.positions)
     return pose.positions[1], v, q
+
+
+def _turn_direction(orientations: np.ndarray, positions: np.ndarray) -> np.ndarray:
+    """
+    Return the direction of a block met while turning in place (the flange point still).
+
+    The grasped object reaches beyond the flange: the motion of a point LEVER ahead of it
+    along the tool's z axis (or, turning about that axis, its x or y axis), first over the
+    small step back, then over the whole edge.  Zero if the orientation does not change.
+    """
+    frames = quaternion_to_rotation(orientations)
+    for axis in (2, 0, 1):
+        lever = positions + LEVER * frames[:, :, axis]
+        for a, b in ((0, 1), (1, 2)):
+            v = lever[b] - lever[a]
+            if np.linalg.norm(v) >= 1e-12:
+                return v
+    return np.zeros(3)
 
 
 class State(str, Enum):
