@@ -243,12 +243,18 @@ def _primitive(entry: object, extra_keys: set[str] = frozenset()) -> Primitive:
                      str(entry.get('name', '')))
 
 
-def _hinge(entry: object) -> Hinge:
+def _check_mapping(entry: object, what: str, keys: set[str], message: str) -> None:
+    """Refuse an entry that is not a mapping (with message) or has keys other than keys."""
     if not isinstance(entry, dict):
-        raise SceneError('hinge must be a mapping with point, axis, stiffness, damping')
-    unknown = set(entry) - {'point', 'axis', 'stiffness', 'damping'}
+        raise SceneError(message)
+    unknown = set(entry) - keys
     if unknown:
-        raise SceneError(f'hinge: unknown keys {", ".join(sorted(map(str, unknown)))}')
+        raise SceneError(f'{what}: unknown keys {", ".join(sorted(map(str, unknown)))}')
+
+
+def _hinge(entry: object) -> Hinge:
+    _check_mapping(entry, 'hinge', {'point', 'axis', 'stiffness', 'damping'},
+                   'hinge must be a mapping with point, axis, stiffness, damping')
     point = _numbers(entry.get('point'), 3, 'hinge needs point')
     axis = _numbers(entry.get('axis'), 3, 'hinge needs axis')
     if np.linalg.norm(axis) < 1e-9:
@@ -258,11 +264,8 @@ def _hinge(entry: object) -> Hinge:
 
 
 def _gate(entry: object) -> Gate:
-    if not isinstance(entry, dict):
-        raise SceneError('gate must be a mapping with orientation and tolerance')
-    unknown = set(entry) - {'orientation', 'tolerance'}
-    if unknown:
-        raise SceneError(f'gate: unknown keys {", ".join(sorted(map(str, unknown)))}')
+    _check_mapping(entry, 'gate', {'orientation', 'tolerance'},
+                   'gate must be a mapping with orientation and tolerance')
     quat = _numbers(entry.get('orientation'), 4, 'gate needs orientation (w, x, y, z)')
     if np.linalg.norm(quat) < 1e-9:
         raise SceneError('gate: orientation must not be zero')
@@ -285,11 +288,8 @@ def _obstacle(entry: object) -> SceneObstacle:
 
 
 def _grasped(entry: object) -> GraspedObject:
-    if not isinstance(entry, dict):
-        raise SceneError('object must be a mapping with mass and shapes')
-    unknown = set(entry) - {'mass', 'shapes'}
-    if unknown:
-        raise SceneError(f'object: unknown keys {", ".join(sorted(map(str, unknown)))}')
+    _check_mapping(entry, 'object', {'mass', 'shapes'},
+                   'object must be a mapping with mass and shapes')
     mass = _scalar(entry, 'mass', 'object')
     shapes = entry.get('shapes')
     if not isinstance(shapes, list) or not shapes:
