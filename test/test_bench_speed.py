@@ -91,7 +91,8 @@ def test_pruning_far_failures_changes_no_cost_and_no_plan():
             clustered_map(ARM, rng, failures)
         sources = ARM.random_configurations(rng, 40)
         target = ARM.random_configurations(rng, 1)[0]
-        for objective in (FailureProbabilityObjective(), HardThresholdObjective(0.02)):
+        for objective in (FailureProbabilityObjective(), HardThresholdObjective(0.02),
+                          FailureProbabilityObjective(reach=0.25)):
             pruned = objective.coster(ARM, fmap)
             every = objective.coster(ARM, fmap, coster_type=UnprunedEdgeCoster)
             for toward in (True, False):

@@ -60,6 +60,18 @@ def test_falls_with_distance_as_inverse_quadratic():
     np.testing.assert_allclose(prob(fmap, points), 1.0 / (1.0 + C_FAIL * d**2), rtol=1e-12)
 
 
+def test_a_reach_tapers_each_failure_to_zero_there():
+    fmap = point_map(([0.0, 0.0, 0.0], [0.0, 0.0, 1.0]), task_space=TaskSpace.POINT3)
+    d = np.linspace(0.01, 0.5, 50)
+    points = TaskPoints(np.column_stack([np.zeros_like(d), np.zeros_like(d), d]))
+    taper = np.maximum(0.0, 1.0 - (d / 0.25) ** 2) ** 2
+    np.testing.assert_allclose(fmap.probability(points, reach=0.25),
+                               taper / (1.0 + C_FAIL * d**2), rtol=1e-12)
+    assert (fmap.probability(points, reach=0.25)[d >= 0.25] == 0).all()
+    np.testing.assert_array_equal(fmap.probability(points, reach=np.inf),
+                                  fmap.probability(points))
+
+
 def test_direction_is_normalised():
     slow = point_map(([0.0, 0.0], [0.001, 0.0]))
     fast = point_map(([0.0, 0.0], [50.0, 0.0]))

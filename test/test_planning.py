@@ -20,6 +20,7 @@ from probdis_ros.model.edge_costs import EdgeCoster, ReferenceEdgeCoster
 from probdis_ros.model.path_cost import edge_points, path_success_probability
 from probdis_ros.planning import (
     EpsilonPlanner,
+    FailureProbabilityObjective,
     HardThresholdObjective,
     make_planner,
     Method,
@@ -127,6 +128,25 @@ def test_compiled_edge_costs_match_the_reference():
         assert index == np.argmin(exact) and total == pytest.approx(exact.min(), rel=1e-9)
 
 
+def test_compiled_costs_with_a_reach_match_the_reference_and_no_reach_is_the_paper():
+    """Idea h's taper in the kernels is the map's, and an infinite reach changes no bit."""
+    for setting in ('2d', '3d-orient'):
+        arm = arm_for_setting(setting)
+        rng = np.random.default_rng(6)
+        fmap = scattered_map(arm, rng, 19)
+        sources = arm.random_configurations(rng, 30)
+        target = arm.random_configurations(rng, 1)[0]
+        local = FailureProbabilityObjective(reach=0.25)
+        fast = local.coster(arm, fmap).costs(sources, target)
+        slow = local.coster(arm, fmap, coster_type=ReferenceEdgeCoster).costs(sources, target)
+        np.testing.assert_allclose(fast, slow, rtol=1e-9)
+        paper = FailureProbabilityObjective().coster(arm, fmap).costs(sources, target)
+        np.testing.assert_array_equal(
+            paper, FailureProbabilityObjective(reach=np.inf).coster(arm, fmap).costs(
+                sources, target))
+        assert (fast <= paper).all() and (fast < paper).any()
+
+
 def test_hard_refuses_edges_above_its_threshold():
     fmap = wall_map()
     objective = HardThresholdObjective(0.01, c_fail=100.0)
@@ -174,6 +194,8 @@ def test_method_strings_are_parsed_and_built_in_one_place():
     assert isinstance(Method.parse('epsilon:0.4').planner(PLANAR), EpsilonPlanner)
     with pytest.raises(ValueError, match='only hard takes'):
         Method.parse('epsilon:0.2:5')
+    assert Method.parse('informed:ah').objective().reach == 0.25
+    assert Method.parse('informed:af').objective() == FailureProbabilityObjective()
 
 
 def test_epsilon_ignores_the_map():

@@ -80,7 +80,8 @@ class EdgeCoster:
             np.asfortranarray(_padded(fmap.points, dim)),
             np.asfortranarray(_padded(fmap.directions, dim)),
             np.asfortranarray(quaternion_to_rotation(fmap.orientations).reshape(-1, 3, 3)),
-            self.c_fail, bool(arm.task_space.has_orientation), bool(prune))
+            (self.c_fail, 1.0 / self.terms.reach ** 2), bool(arm.task_space.has_orientation),
+            bool(prune))
         self._arm = arm.kernel_params()
         self._terms = (float(self.terms.length_weight), float(self.terms.risk_weight),
                        float(self.terms.cap), P_MAX)
@@ -141,9 +142,11 @@ class ReferenceEdgeCoster(EdgeCoster):
             if len(points) == 0:
                 out[i] = 0.0
                 continue
-            p = self.fmap.probability(self.arm.fk(points), self.c_fail) if len(self.fmap) \
+            p = self.fmap.probability(self.arm.fk(points), self.c_fail,
+                                      reach=self.terms.reach) if len(self.fmap) \
                 else np.zeros(len(points))
-            start = self.fmap.probability(self.arm.fk(a), self.c_fail, AT_FAILURE)[0] \
+            start = self.fmap.probability(self.arm.fk(a), self.c_fail, AT_FAILURE,
+                                          self.terms.reach)[0] \
                 if len(self.fmap) and self.terms.cap < np.inf else 0.0
             cost = self.terms.reference_cost(p, step, self.delta, step * len(points), start)
             out[i] = cost if cost < limits[i] else np.inf

@@ -25,7 +25,8 @@ than the arithmetic of one point, so no function is called per point.)
 
 Arm parameters as in :mod:`probdis_ros.model.kinematics`.  Failure parameters: points
 (F, 3), unit directions (F, 3) (z = 0 in 2-D), rotations (F, 3, 3) of the failure
-orientations, c_fail, and use_orient.
+orientations, c_fail as the pair (C_FAIL, 1 / reach^2) (0: no reach, the paper's kernel),
+and use_orient.
 """
 
 import numba
@@ -184,7 +185,9 @@ def _chunk_probabilities(pos, rot, count, f_points, f_dirs, f_rots, c_fail, use_
             # kernel's half-angle form (below ANGLE_MARGIN)
             angle = arccos(min(1.0, max(-1.0, (trace - 1.0) * 0.5)))
             factor = 1.0 - 0.5 * max(0.0, angle - spread - ANGLE_MARGIN) * INV_PI
-        bounds[f] = (1.0 + 1e-9) * ratio * factor / (1.0 + c_fail * gap * gap)
+        taper = max(0.0, 1.0 - gap * gap * c_fail[1])
+        bounds[f] = ((1.0 + 1e-9) * ratio * factor * (taper * taper)
+                     / (1.0 + c_fail[0] * gap * gap))
     first = 0
     for f in range(n_fail):
         if bounds[f] > bounds[first]:
@@ -256,11 +259,17 @@ def _least(p_out, count):
 
 @numba.njit(cache=True, error_model='numpy', inline='always')
 def _coord_probability(dx, dy, dz, ux, uy, uz, c_fail, near2, at_failure):
-    """Return P_COORD of one failure at offset (dx, dy, dz) from it to the point."""
+    """
+    Return P_COORD of one failure at offset (dx, dy, dz) from it to the point.
+
+    c_fail is (C_FAIL, 1 / reach^2): the taper of FailureMap.probability, which is exactly
+    1.0 with no reach (0), so that the paper's kernel gives the same numbers bit for bit.
+    """
     d2 = dx * dx + dy * dy + dz * dz
     c = (ux * dx + uy * dy + uz * dz) / np.sqrt(d2) if d2 > near2 else at_failure
     ratio = arccos(min(1.0, max(-1.0, c))) / np.pi
-    return ratio * ratio * ratio / (1.0 + c_fail * d2)
+    taper = max(0.0, 1.0 - d2 * c_fail[1])
+    return ratio * ratio * ratio * (taper * taper) / (1.0 + c_fail[0] * d2)
 
 
 @numba.njit(cache=True, error_model='numpy', inline='always')

@@ -146,14 +146,17 @@ class FailureMap:
         self.__init__(self.task_space, self.c_fail)
 
     def probability(self, poses: TaskPoints, c_fail: float | None = None,
-                    behind_within: float = 0.0) -> np.ndarray:
+                    behind_within: float = 0.0, reach: float = math.inf) -> np.ndarray:
         """
         ``P(FAIL | c, F)`` for each pose of the batch, in [0, 1] (0 for an empty map).
 
         ``c_fail`` replaces the map's C_FAIL (the Hard baseline draws its regions with its
         own); None uses the map's.  A pose within ``behind_within`` [m] of a failure counts
         as behind it (alpha = 0) instead of the paper's alpha = pi at the failure itself
-        (where a Hard edge starts: :mod:`probdis_ros.model.kernels`).
+        (where a Hard edge starts: :mod:`probdis_ros.model.kernels`).  A finite ``reach``
+        [m] (beyond the paper; the informed method's idea h) tapers each failure's
+        probability by ``(1 - d^2 / reach^2)^2`` to 0 at that distance: a block tells of the
+        surface it met, not of all the space beyond it.  Infinite: the paper's kernel.
         """
         c_fail = self.c_fail if c_fail is None else float(c_fail)
         x = np.asarray(poses.positions, dtype=float)
@@ -167,7 +170,8 @@ class FailureMap:
             cos_alpha = np.where(dist2 > behind_within ** 2, cos_alpha / dist,
                                  1.0 if behind_within > 0 else -1.0)
         alpha = np.arccos(np.clip(cos_alpha, -1.0, 1.0))
-        prob = (alpha / np.pi) ** 3 / (1.0 + c_fail * dist2)
+        taper = np.maximum(0.0, 1.0 - dist2 / reach ** 2)
+        prob = (alpha / np.pi) ** 3 * (taper * taper) / (1.0 + c_fail * dist2)
         if self.task_space.has_orientation:
             if poses.orientations is None:
                 raise FailureMapError('this map models orientation: poses need quaternions')

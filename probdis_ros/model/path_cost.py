@@ -56,7 +56,8 @@ class EdgeTerms:
     ``cost = length_weight * L - risk_weight * sum (s / delta) log(1 - p)``, or infinite
     when a point probability exceeds ``cap`` -- unless the edge started above the cap and is
     on its way out, its probability not rising (a hard constraint may be left, never
-    entered); the probabilities are computed with ``c_fail`` (None: the map's own C_FAIL).
+    entered); the probabilities are computed with ``c_fail`` (None: the map's own C_FAIL)
+    and ``reach`` (:meth:`FailureMap.probability`; infinite: the paper's kernel).
     Objectives (:mod:`probdis_ros.planning.objectives`) are what the planner is handed;
     these are what they reduce to, so that one generic kernel serves every objective without
     a branch per method.
@@ -66,11 +67,14 @@ class EdgeTerms:
     risk_weight: float = 1.0
     cap: float = math.inf
     c_fail: float | None = None
+    reach: float = math.inf
 
     def __post_init__(self) -> None:
         """Refuse terms that would make a cost negative or meaningless."""
         if not (self.length_weight >= 0 and self.risk_weight >= 0 and self.cap >= 0):
             raise ValueError('length_weight, risk_weight and cap must be >= 0')
+        if not self.reach > 0:
+            raise ValueError(f'reach must be > 0 (inf: none), got {self.reach!r}')
         if self.c_fail is not None and not (math.isfinite(self.c_fail) and self.c_fail > 0):
             raise ValueError(f'c_fail must be a positive number, got {self.c_fail!r}')
 

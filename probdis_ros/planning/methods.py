@@ -40,6 +40,7 @@ from probdis_ros.planning.informed import (
     informed_loop,
     informed_map,
     informed_planner,
+    LOCAL_REACH,
 )
 from probdis_ros.planning.objectives import (
     DEFAULT_THRESHOLD,
@@ -126,6 +127,8 @@ class Method:
 
     def objective(self, length_weight: float = DEFAULT_LENGTH_WEIGHT):
         """Return the objective the planner minimises (None for Epsilon: no search)."""
+        if self.name == 'informed' and 'h' in self.idea_letters:
+            return FailureProbabilityObjective(length_weight, LOCAL_REACH)
         if self.name in ('probabilistic', 'informed'):
             return FailureProbabilityObjective(length_weight)
         if self.name == 'hard':

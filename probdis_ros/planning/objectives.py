@@ -99,18 +99,26 @@ class Objective(ABC):
 
 @dataclass(frozen=True)
 class FailureProbabilityObjective(Objective):
-    """Minus the log success probability, plus ``length_weight`` times the length (lambda)."""
+    """
+    Minus the log success probability, plus ``length_weight`` times the length (lambda).
+
+    ``reach`` [m]: how far a failure's probability extends (infinite: the paper's kernel;
+    finite: the informed method's idea h, :meth:`FailureMap.probability`).
+    """
 
     length_weight: float = DEFAULT_LENGTH_WEIGHT
+    reach: float = math.inf
 
     def __post_init__(self) -> None:
-        """Refuse a negative length weight."""
+        """Refuse a negative length weight or a reach that is not positive."""
         if not self.length_weight >= 0:
             raise ValueError(f'length_weight must be >= 0, got {self.length_weight}')
+        if not self.reach > 0:
+            raise ValueError(f'reach must be > 0 (inf: none), got {self.reach}')
 
     def terms(self) -> EdgeTerms:
         """Return the risk term at weight 1, lambda on length, nothing infeasible."""
-        return EdgeTerms(self.length_weight, 1.0, math.inf, None)
+        return EdgeTerms(self.length_weight, 1.0, math.inf, None, self.reach)
 
 
 @dataclass(frozen=True)
