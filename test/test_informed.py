@@ -65,7 +65,7 @@ def test_informed_parses_its_ideas(text, ideas, shown):
 
 
 @pytest.mark.parametrize('text', ['informed:x', 'informed:aa', 'informed:a:3',
-                                  'informed:h', 'informed:g', 'informed:eg',
+                                  'informed:hh', 'informed:g', 'informed:eg',
                                   'informed:1'])
 def test_informed_refuses_unknown_ideas(text):
     with pytest.raises(ValueError, match='informed'):

@@ -27,6 +27,7 @@ from probdis_ros.planning import (
     ProbRRT,
     RRTSettings,
 )
+from probdis_ros.planning.informed import LOCAL_REACH
 from probdis_ros.planning.prob_rrt import ROBOT_JOINT_MARGIN
 import pytest
 
@@ -194,7 +195,7 @@ def test_method_strings_are_parsed_and_built_in_one_place():
     assert isinstance(Method.parse('epsilon:0.4').planner(PLANAR), EpsilonPlanner)
     with pytest.raises(ValueError, match='only hard takes'):
         Method.parse('epsilon:0.2:5')
-    assert Method.parse('informed:ah').objective().reach == 0.25
+    assert Method.parse('informed:ah').objective().reach == LOCAL_REACH
     assert Method.parse('informed:af').objective() == FailureProbabilityObjective()
 
 

@@ -16,6 +16,8 @@
 
 from __future__ import annotations
 
+import math
+
 from geometry_msgs.msg import Point
 import numpy as np
 from probdis_ros.model import Arm, FailureMap, TaskPoints
@@ -33,8 +35,13 @@ def _point(x: np.ndarray) -> Point:
 
 
 def markers_msg(arm: Arm, fmap: FailureMap, path: np.ndarray | None, clock,
-                seed: int = 0) -> MarkerArray:
-    """Build the marker array: failures, the planned path (if any) and map samples."""
+                seed: int = 0, reach: float = math.inf) -> MarkerArray:
+    """
+    Build the marker array: failures, the planned path (if any) and map samples.
+
+    The samples are coloured by the probability the planner prices (``reach``: its
+    objective's, infinite for the paper's kernel).
+    """
     stamp = clock.now().to_msg()
     out = MarkerArray()
     clear = Marker(action=Marker.DELETEALL)
@@ -60,7 +67,7 @@ def markers_msg(arm: Arm, fmap: FailureMap, path: np.ndarray | None, clock,
         quats = None
         if fmap.task_space.has_orientation:
             quats = fmap.orientations[rng.integers(len(fmap), size=MAP_SAMPLES)]
-        prob = fmap.probability(TaskPoints(samples, quats))
+        prob = fmap.probability(TaskPoints(samples, quats), reach=reach)
         cloud = Marker(type=Marker.POINTS, action=Marker.ADD, ns='failure_map', id=0)
         cloud.header.frame_id, cloud.header.stamp = FRAME, stamp
         cloud.scale.x = cloud.scale.y = 0.01

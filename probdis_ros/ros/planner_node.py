@@ -42,6 +42,7 @@ from collections import deque
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import asdict
 import json
+import math
 import os
 from pathlib import Path
 import socket
@@ -444,8 +445,10 @@ class PlannerNode(Node):
     def _publish_markers(self, path: np.ndarray | None) -> None:
         """Build and publish the RViz markers in the I/O thread (they take milliseconds)."""
         fmap = FailureMap.from_dict(self.fmap.to_dict())
+        objective = Method.from_parameters(self.get_parameter('method').value).objective()
+        reach = objective.terms().reach if objective is not None else math.inf
         self.io.submit(lambda: self.marker_pub.publish(
-            markers_msg(self.arm, fmap, path, self.get_clock())))
+            markers_msg(self.arm, fmap, path, self.get_clock(), reach=reach)))
 
     # -- services ----------------------------------------------------------------------
 
