@@ -209,7 +209,10 @@ class ProbRRT:
             plan.rewires = trees[0].rewires + trees[1].rewires
         return plan
 
-    def _roots(self, start: np.ndarray, goal: np.ndarray, capacity: int) -> tuple[Tree, Tree]:
+    def _roots(self, start: np.ndarray, goal: np.ndarray, capacity: int,
+               coster: EdgeCoster | None = None, rng: np.random.Generator | None = None
+               ) -> tuple[Tree, Tree]:
+        """Return the start and the goal tree, each its root alone (coster, rng: subclasses')."""
         ends = self.arm.positions(np.array([start, goal]))
         return (Tree.rooted(start, ends[0], capacity, reverse=False),
                 Tree.rooted(goal, ends[1], capacity, reverse=True))
@@ -228,7 +231,7 @@ class ProbRRT:
         start = self._checked(start, 'start')
         goal = self._checked(goal, 'goal')
         t0 = time.perf_counter() if t0 is None else t0
-        trees = self._roots(start, goal, s.iterations + 1)
+        trees = self._roots(start, goal, s.iterations + 1, coster, rng)
         if s.plan_time <= 0:
             for tree, other in (trees, trees[::-1]):
                 self._grow_round(tree, other.nodes[0], coster, rng, s.iterations)

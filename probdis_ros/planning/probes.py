@@ -118,6 +118,42 @@ def _log(m: np.ndarray) -> np.ndarray:
     return _vee(m) * scale[:, None]
 
 
+#: [rad] the joint shift of the finite-difference Jacobians
+JACOBIAN_SHIFT = 1e-6
+
+
+def _dls_steps(arm: Arm, q: np.ndarray, target: np.ndarray, aim: np.ndarray | None,
+               settings: ProbeSettings, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+    """
+    Return configurations q moved toward the targets by damped least squares, all at once.
+
+    Without ``aim``: two steps toward the positions ``target``.  With ``aim`` (rotation
+    matrices, one per row): three steps toward the poses, the orientation weighed by
+    ``settings.turn_weight``.  Finite-difference Jacobians; q is kept within the limits.
+    """
+    n, joints = q.shape
+    shift = np.concatenate([np.zeros((1, joints)), JACOBIAN_SHIFT * np.eye(joints)])[None]
+    for _ in range(2 if aim is None else 3):
+        probe = (q[:, None, :] + shift).reshape(-1, joints)
+        if aim is None:
+            here = arm.positions(probe).reshape(n, joints + 1, -1)
+            jac = np.transpose(here[:, 1:] - here[:, :1], (0, 2, 1)) / JACOBIAN_SHIFT
+            error = target - here[:, 0]
+        else:
+            pos, rot = arm.tip_frames(probe)
+            pos, rot = pos.reshape(n, joints + 1, 3), rot.reshape(n, joints + 1, 3, 3)
+            moved = rot[:, 1:] @ np.transpose(rot[:, :1], (0, 1, 3, 2))
+            w = settings.turn_weight
+            jac = np.concatenate([pos[:, 1:] - pos[:, :1], w * _vee(moved)], axis=2)
+            jac = np.transpose(jac, (0, 2, 1)) / JACOBIAN_SHIFT            # (n, 6, joints)
+            error = np.concatenate([target - pos[:, 0], w * _log(
+                aim @ np.transpose(rot[:, 0], (0, 2, 1)))], axis=1)
+        gram = jac @ np.transpose(jac, (0, 2, 1)) + settings.damping * np.eye(error.shape[1])
+        dq = np.einsum('nij,ni->nj', jac, np.linalg.solve(gram, error[..., None])[..., 0])
+        q = np.clip(q + dq, lower, upper)
+    return q
+
+
 def probe_chains(arm: Arm, start: np.ndarray, directions: np.ndarray,
                  settings: ProbeSettings = ProbeSettings(), lower: np.ndarray | None = None,
                  upper: np.ndarray | None = None, axes: np.ndarray | None = None
@@ -137,7 +173,7 @@ def probe_chains(arm: Arm, start: np.ndarray, directions: np.ndarray,
     """
     lower = arm.lower if lower is None else lower
     upper = arm.upper if upper is None else upper
-    n, dim = len(directions), arm.task_space.dim
+    n = len(directions)
     joints = arm.n_joints
     x0 = arm.positions(start)[0]
     q = np.tile(start, (n, 1))
@@ -145,8 +181,6 @@ def probe_chains(arm: Arm, start: np.ndarray, directions: np.ndarray,
     nodes: list[list[np.ndarray]] = [[] for _ in range(n)]
     steps = round(settings.length / settings.step)
     every = max(1, round(settings.spacing / settings.step))
-    eps = 1e-6
-    shift = eps * np.eye(joints)
     turning = axes is not None and settings.turn > 0 and arm.task_space.has_orientation
     turns = math.ceil(settings.turn / settings.turn_step) if turning else 0
     if turning:
@@ -154,34 +188,9 @@ def probe_chains(arm: Arm, start: np.ndarray, directions: np.ndarray,
     for k in range(1, turns + steps + 1):
         along = max(0, k - turns)
         target = x0 + directions * (along * settings.step)
-        if turning:
-            aim = rotations(axes, settings.turn * min(1.0, k / turns)) @ r0
-            for _ in range(3):
-                probe = (q[:, None, :] + np.concatenate([np.zeros((1, joints)), shift])[None])
-                pos, rot = arm.tip_frames(probe.reshape(-1, joints))
-                pos, rot = pos.reshape(n, joints + 1, 3), rot.reshape(n, joints + 1, 3, 3)
-                moved = rot[:, 1:] @ np.transpose(rot[:, :1], (0, 1, 3, 2))
-                w = settings.turn_weight
-                jac = np.concatenate([pos[:, 1:] - pos[:, :1], w * _vee(moved)], axis=2)
-                jac = np.transpose(jac, (0, 2, 1)) / eps                        # (n, 6, joints)
-                error = np.concatenate([target - pos[:, 0], w * _log(
-                    aim @ np.transpose(rot[:, 0], (0, 2, 1)))], axis=1)
-                gram = jac @ np.transpose(jac, (0, 2, 1)) + settings.damping * np.eye(6)
-                dq = np.einsum('nij,ni->nj', jac,
-                               np.linalg.solve(gram, error[..., None])[..., 0])
-                q = np.clip(q + dq, lower, upper)
-            strayed = np.linalg.norm(arm.positions(q) - target, axis=1) > settings.tolerance
-        else:
-            for _ in range(2):
-                probe = (q[:, None, :] + np.concatenate([np.zeros((1, joints)), shift])[None])
-                here = arm.positions(probe.reshape(-1, joints)).reshape(n, joints + 1, dim)
-                jac = np.transpose(here[:, 1:] - here[:, :1], (0, 2, 1)) / eps
-                error = target - here[:, 0]
-                gram = jac @ np.transpose(jac, (0, 2, 1)) + settings.damping * np.eye(dim)
-                dq = np.einsum('nij,ni->nj', jac,
-                               np.linalg.solve(gram, error[..., None])[..., 0])
-                q = np.clip(q + dq, lower, upper)
-            strayed = np.linalg.norm(arm.positions(q) - target, axis=1) > settings.tolerance
+        aim = rotations(axes, settings.turn * min(1.0, k / turns)) @ r0 if turning else None
+        q = _dls_steps(arm, q, target, aim, settings, lower, upper)
+        strayed = np.linalg.norm(arm.positions(q) - target, axis=1) > settings.tolerance
         alive &= ~strayed
         if not alive.any():
             break
@@ -221,23 +230,14 @@ class ProbeRRT(ProbRRT):
             raise ValueError('ProbeRRT needs straight or turning probes')
         self.probes = probes or ProbeSettings()
         self.straight, self.turning, self.untried = straight, turning, float(untried)
-        self._hang: tuple[EdgeCoster, np.random.Generator] | None = None
         super().__init__(arm, settings, objective, **kwargs)
 
-    def grow(self, start: np.ndarray, goal: np.ndarray, coster: EdgeCoster,
-             rng: np.random.Generator, t0: float | None = None) -> tuple[Tree, Tree]:
-        """Grow the trees as ProbRRT does, the start tree rooted with the probes."""
-        self._hang = (coster, rng)
-        try:
-            return super().grow(start, goal, coster, rng, t0)
-        finally:
-            self._hang = None
-
-    def _roots(self, start: np.ndarray, goal: np.ndarray, capacity: int) -> tuple[Tree, Tree]:
+    def _roots(self, start: np.ndarray, goal: np.ndarray, capacity: int,
+               coster: EdgeCoster | None = None, rng: np.random.Generator | None = None
+               ) -> tuple[Tree, Tree]:
         """Root both trees; while growing, hang the probes (turned by a draw) from the start."""
-        if self._hang is None:          # warming up, or connecting
+        if coster is None or rng is None:          # warming up
             return super()._roots(start, goal, capacity)
-        coster, rng = self._hang
         dim = self.arm.task_space.dim
         directions = even_directions(self.probes.directions, dim) @ random_turn(rng, dim).T
         keep = self._untried(directions, self.arm.positions(start)[0], coster.fmap)
