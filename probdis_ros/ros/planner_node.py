@@ -180,8 +180,8 @@ PARAMETERS = {
                                 'far from the block [rad]; 0: to the last via point only',
                                 0.0, 10.0)),
     'method': ('informed', ParameterDescriptor(
-        description='informed (the method of the paper with 8x its iterations and turning '
-                    'probes around the start) | '
+        description='informed (the method of the paper with 8x its iterations, turning '
+                    'probes around the start and failures that reach 0.5 m) | '
                     'probabilistic (that of the paper) | hard | epsilon')),
     'threshold': (0.01, _float('Y of the hard method', 0.0, 1.0)),
     'epsilon': (0.2, _float('X of the epsilon method', 0.0, 1.0)),
