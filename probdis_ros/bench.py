@@ -18,6 +18,7 @@ from __future__ import annotations
 
 from itertools import pairwise
 import json
+import math
 import os
 import platform
 import statistics
@@ -124,9 +125,12 @@ def straight_path_map(failures: int = 19):
     return start, goal, fmap
 
 
-def bench_plan(seeds: int = 20, large: int = 400) -> dict:
+def bench_plan(seeds: int = 20, large: int = 400, reach: float = math.inf) -> dict:
     """
     Median ProbRRT planning time (paper parameters, iiwa with orientation, one thread).
+
+    ``reach`` [m]: failures taper to 0 this far away (the informed method's idea h, whose
+    effect on plans is measured by the family and paper sweeps); inf: the paper's kernel.
 
     Wall time (``median_s_*``) and this process's CPU time (``cpu_median_s_*``: on a
     shared, loaded machine the wall time also counts the time others hold the cores).
@@ -135,7 +139,7 @@ def bench_plan(seeds: int = 20, large: int = 400) -> dict:
     grown over episodes (0: skip it); also the mean number of RRT* re-parentings per plan.
     """
     from probdis_ros.model import FailureMap
-    from probdis_ros.planning import ProbRRT
+    from probdis_ros.planning import FailureProbabilityObjective, ProbRRT
 
     start, goal, fmap = nineteen_failure_map()
     arm = arm_for_setting('3d-orient')
@@ -144,9 +148,10 @@ def bench_plan(seeds: int = 20, large: int = 400) -> dict:
     if large:
         maps.append((f'{large}_failures',
                      *learned_failure_map(large, across_episodes=True)))
-    planner = ProbRRT(arm)
+    planner = ProbRRT(arm, None, FailureProbabilityObjective(reach=reach))
     planner.plan(start, goal, fmap, np.random.default_rng(0))   # compile the kernels
-    result = {'machine': machine(), 'seeds': seeds, 'load_average': os.getloadavg()[0]}
+    result = {'machine': machine(), 'seeds': seeds, 'load_average': os.getloadavg()[0],
+              'reach': reach}
     for key, begin, end, the_map in maps:
         times, cpu_times, rewires = [], [], []
         for seed in range(seeds):
@@ -439,12 +444,16 @@ def cmd_bench_plan(args) -> int:
     """Time ProbRRT on the iiwa with orientation: empty map, 19 and 400 failures."""
     if args.seeds < 1 or args.large < 0:
         raise ValueError('--seeds must be at least 1 and --large at least 0')
-    result = bench_plan(args.seeds, args.large)
+    if not args.reach > 0:
+        raise ValueError('--reach must be > 0 (inf: the paper\'s kernel)')
+    result = bench_plan(args.seeds, args.large, args.reach)
     keys = [k for k in result if k.startswith('median_s_')]
     if args.json:
         print(json.dumps({k: result[k] for k in keys}))
         return 0
-    print(f'ProbRRT plan, iiwa with orientation, paper parameters, one thread, '
+    kernel = 'the paper\'s kernel' if math.isinf(args.reach) else \
+        f'failures reaching {args.reach:g} m (idea h)'
+    print(f'ProbRRT plan, iiwa with orientation, paper parameters, {kernel}, one thread, '
           f'median of {args.seeds} seeds:')
     for key in keys:
         name = key.removeprefix('median_s_')
@@ -462,6 +471,9 @@ def add_plan_command(bench_subparsers) -> None:
     plan.add_argument('--seeds', type=int, default=20, help='plans per map')
     plan.add_argument('--large', type=int, default=400,
                       help='failures of the large map, grown over episodes (0: skip it)')
+    plan.add_argument('--reach', type=float, default=math.inf,
+                      help='[m] failures taper to 0 this far away (the informed method\'s '
+                      'idea h; 0.5 there); default inf, the paper\'s kernel')
     plan.add_argument('--json', action='store_true',
                       help='print {"median_s_empty_map": float, "median_s_19_failures": float, '
                       '"median_s_400_failures": float}')

@@ -162,4 +162,15 @@ def test_bench_plan_prints_wall_and_cpu_time_and_the_load(capsys):
     assert args.handler(args) == 0
     out = capsys.readouterr().out
     assert out.count('s wall, ') == 2 and out.count('s CPU') == 2
-    assert 'load average' in out
+    assert 'load average' in out and "the paper's kernel" in out
+
+
+def test_bench_plan_times_local_failures_and_refuses_a_reach_that_is_not_positive(capsys):
+    parser = argparse.ArgumentParser()
+    add_plan_command(parser.add_subparsers())
+    args = parser.parse_args(['plan', '--seeds', '1', '--large', '0', '--reach', '0.5'])
+    assert args.handler(args) == 0
+    assert 'failures reaching 0.5 m (idea h)' in capsys.readouterr().out
+    with pytest.raises(ValueError, match='--reach'):
+        args = parser.parse_args(['plan', '--reach', '0'])
+        args.handler(args)
