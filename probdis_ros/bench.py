@@ -445,13 +445,13 @@ def cmd_bench_plan(args) -> int:
     if args.seeds < 1 or args.large < 0:
         raise ValueError('--seeds must be at least 1 and --large at least 0')
     if not args.reach > 0:
-        raise ValueError('--reach must be > 0 (inf: the paper\'s kernel)')
+        raise ValueError("--reach must be > 0 (inf: the paper's kernel)")
     result = bench_plan(args.seeds, args.large, args.reach)
     keys = [k for k in result if k.startswith('median_s_')]
     if args.json:
         print(json.dumps({k: result[k] for k in keys}))
         return 0
-    kernel = 'the paper\'s kernel' if math.isinf(args.reach) else \
+    kernel = "the paper's kernel" if math.isinf(args.reach) else \
         f'failures reaching {args.reach:g} m (idea h)'
     print(f'ProbRRT plan, iiwa with orientation, paper parameters, {kernel}, one thread, '
           f'median of {args.seeds} seeds:')
@@ -472,8 +472,8 @@ def add_plan_command(bench_subparsers) -> None:
     plan.add_argument('--large', type=int, default=400,
                       help='failures of the large map, grown over episodes (0: skip it)')
     plan.add_argument('--reach', type=float, default=math.inf,
-                      help='[m] failures taper to 0 this far away (the informed method\'s '
-                      'idea h; 0.5 there); default inf, the paper\'s kernel')
+                      help="[m] failures taper to 0 this far away (the informed method's "
+                      "idea h; 0.5 there); default inf, the paper's kernel")
     plan.add_argument('--json', action='store_true',
                       help='print {"median_s_empty_map": float, "median_s_19_failures": float, '
                       '"median_s_400_failures": float}')
