@@ -445,7 +445,8 @@ class PlannerNode(Node):
     def _publish_markers(self, path: np.ndarray | None) -> None:
         """Build and publish the RViz markers in the I/O thread (they take milliseconds)."""
         fmap = FailureMap.from_dict(self.fmap.to_dict())
-        objective = Method.from_parameters(self.get_parameter('method').value).objective()
+        # coloured as the running planner prices the map (Epsilon has no objective)
+        objective = getattr(self.run.loop.planner, 'objective', None) if self.run else None
         reach = objective.terms().reach if objective is not None else math.inf
         self.io.submit(lambda: self.marker_pub.publish(
             markers_msg(self.arm, fmap, path, self.get_clock(), reach=reach)))
