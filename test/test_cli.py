@@ -26,6 +26,12 @@ def test_help_lists_the_subcommands(probdis):
         assert command in out
 
 
+def test_sweep_help_names_every_idea_of_the_informed_method(probdis):
+    from probdis_ros.planning.informed import IDEAS
+    out = ' '.join(probdis('experiment', 'sweep', '--help').stdout.split())
+    assert f'letters of {IDEAS})' in out
+
+
 def test_fk_json_at_zero_is_straight_up(probdis):
     doc = json.loads(probdis('fk', '--json', *['0'] * 7).stdout)
     np.testing.assert_allclose(doc['position'], [0, 0, 1.306], atol=1e-9)
