@@ -128,15 +128,19 @@ def family_table(summary: dict) -> str:
              '| median plan time per path [s] |',
              '| --- | --- | --- | --- | --- | --- | --- |']
     for c in family_cells(summary):
-        paths = '-' if c['mean_paths_successful'] is None else \
-            f'{c["mean_paths_successful"]:.1f}'
-        plan = '-' if c['plan_time_s_median'] is None else f'{c["plan_time_s_median"]:.3f}'
-        share = c.get('empty_plan_share')
-        empty = '?' if share is None else f'{share:.2f}'
-        lines.append(f'| {c["family"]} | {c["method"]} | {c["episodes"]} | '
-                     f'{c["success"]:.2f} ({c["ci95"][0]:.2f}-{c["ci95"][1]:.2f}) | '
-                     f'{paths} | {empty} | {plan} |')
+        lines.append(f'| {c["family"]} | {c["method"]} | {c["episodes"]} | {_outcome(c)} |')
     return '\n'.join(lines) + '\n'
+
+
+def _outcome(cell: dict) -> str:
+    """Return a cell's success (95 % CI), mean paths, empty-plan share, plan time columns."""
+    paths = '-' if cell['mean_paths_successful'] is None else \
+        f'{cell["mean_paths_successful"]:.1f}'
+    plan = '-' if cell['plan_time_s_median'] is None else f'{cell["plan_time_s_median"]:.3f}'
+    share = cell.get('empty_plan_share')
+    empty = '?' if share is None else f'{share:.2f}'
+    low, high = cell['ci95']
+    return f'{cell["success"]:.2f} ({low:.2f}-{high:.2f}) | {paths} | {empty} | {plan}'
 
 
 def markdown_tables(summary: dict) -> str:
@@ -157,14 +161,8 @@ def markdown_table(summary: dict) -> str:
              '| median plan time per path [s] |',
              '| --- | --- | --- | --- | --- | --- | --- | --- |']
     for c in summary['cells']:
-        paths = '-' if c['mean_paths_successful'] is None else \
-            f'{c["mean_paths_successful"]:.1f}'
-        plan = '-' if c['plan_time_s_median'] is None else f'{c["plan_time_s_median"]:.3f}'
-        share = c.get('empty_plan_share')
-        empty = '?' if share is None else f'{share:.2f}'
         lines.append(f'| {c["setting"]} | {c["obstacles"]} | {c["method"]} | '
-                     f'{c["episodes"]} | {c["success"]:.2f} ({c["ci95"][0]:.2f}-'
-                     f'{c["ci95"][1]:.2f}) | {paths} | {empty} | {plan} |')
+                     f'{c["episodes"]} | {_outcome(c)} |')
     return '\n'.join(lines) + '\n'
 
 
