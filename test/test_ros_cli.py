@@ -18,6 +18,8 @@ import json
 import os
 import signal
 import subprocess
+import sys
+import time
 
 from conftest import probdis_command
 from probdis_ros.resources import scenario_path
@@ -67,6 +69,33 @@ def test_service_commands_against_a_running_planner(env, tmp_path):
         assert planner.wait(10) == 0
     timeout = run(env, 'start', '--timeout', '1')
     assert timeout.returncode == 3 and 'is the planner running' in timeout.stderr
+
+
+def test_the_demo_waits_for_a_planner_still_coming_up_and_stops_when_it_dies(env, monkeypatch):
+    # a fresh install's planner compiles its kernels for about two minutes before its
+    # service is up: the demo waits for it while it lives, and says why
+    from probdis_ros.ros.client import PlannerClient
+    from probdis_ros.ros.demo import start_disentangling
+
+    for name in ('ROS_DOMAIN_ID', 'ROS_AUTOMATIC_DISCOVERY_RANGE'):
+        monkeypatch.setenv(name, env[name])
+    alive = subprocess.Popen([sys.executable, '-c', 'import time; time.sleep(120)'])
+    dead = subprocess.Popen([sys.executable, '-c', 'raise SystemExit(3)'])
+    dead.wait(30)
+    said = []
+    try:
+        with PlannerClient() as client:
+            began = time.monotonic()
+            with pytest.raises(RuntimeError, match='did not come up within 4 s'):
+                start_disentangling(client, alive, alive, said.append, startup_limit=4.0,
+                                    call_timeout=1.0, tell_after=1.0)
+            assert time.monotonic() - began >= 4.0
+            assert any('waiting for the planner' in line for line in said)
+            with pytest.raises(RuntimeError, match=r'the planner exited \(code 3\)'):
+                start_disentangling(client, dead, alive, said.append, call_timeout=1.0)
+    finally:
+        alive.kill()
+        alive.wait(10)
 
 
 def test_demo_disentangles_through_two_processes_and_its_bag_replays_the_same(env, tmp_path):

@@ -75,6 +75,54 @@ def _running(client) -> bool:
         return False
 
 
+#: [s] how long the planner may take to come up: its first start after an install compiles
+#: the planning kernels (about two minutes on two cores; later starts load them in seconds)
+STARTUP_LIMIT = 600.0
+#: [s] how long a planner that answers but refuses (no joint states yet) is asked again
+REFUSALS_FOR = 60.0
+
+
+def start_disentangling(client, planner: subprocess.Popen, mock: subprocess.Popen, say,
+                        startup_limit: float = STARTUP_LIMIT, call_timeout: float = 10.0,
+                        tell_after: float = 5.0) -> str:
+    """
+    Start the disentangling on the planner's service; return its answer.
+
+    Waits while the planner process is alive and its service is not up yet (up to
+    startup_limit [s], saying why after tell_after), asks again for REFUSALS_FOR while it
+    refuses, and raises RuntimeError if a node exits or the planner keeps refusing.
+    """
+    began = time.monotonic()
+    answered_at = None
+    told = False
+    while True:
+        try:
+            ok, message = client.call('start', timeout=call_timeout)
+            answered_at = answered_at or time.monotonic()
+        except TimeoutError as err:
+            # DDS can drop an answer while it still matches the new client; the status says
+            # whether the start took effect
+            ok, message = False, str(err)
+            if _running(client):
+                ok, message = True, 'started (its answer was lost; status says so)'
+        if ok:
+            return message
+        for name, process in (('planner', planner), ('mock iiwa', mock)):
+            if process.poll() is not None:
+                raise RuntimeError(f'the {name} exited (code {process.returncode}) before the '
+                                   f'run started: {message}')
+        now = time.monotonic()
+        if answered_at is not None and now - answered_at > REFUSALS_FOR:
+            raise RuntimeError(f'planner refused to start: {message}')
+        if now - began > startup_limit:
+            raise RuntimeError(f'planner did not come up within {startup_limit:.0f} s: {message}')
+        if not told and answered_at is None and now - began > tell_after:
+            say('demo: waiting for the planner to come up (its first start after an install '
+                'compiles the planning kernels, about two minutes; later starts take seconds)')
+            told = True
+        time.sleep(0.2)
+
+
 def world_of(world: str, engine: str) -> tuple[Path, str, np.ndarray]:
     """Return a world's file, name and goal: a physics scene, or a kinematic scenario."""
     if engine == 'physics':
@@ -115,27 +163,14 @@ def run_demo(world: str = DEFAULT_SCENE, timeout: float = 300.0, quiet: bool = F
             'probdis_ros.ros.planner_node', '--params-file', params, '-p', f'goal:={goal}',
             '-p', f'map_file:={Path(tmp) / "map.json"}',
             *(('-p', 'use_sim_time:=true') if sim_time else ()), *extra_planner_args), env=env)
-        t0 = time.monotonic()
         status: dict = {}
         try:
             with PlannerClient() as client:
                 say(f'demo: {name} ({engine}): mock iiwa and planner started '
                     f'(ROS_DOMAIN_ID={env["ROS_DOMAIN_ID"]})')
-                while True:
-                    try:
-                        ok, message = client.call('start', timeout=10.0)
-                    except TimeoutError as err:
-                        # DDS can drop an answer while it still matches the new client; the
-                        # status says whether the start took effect
-                        ok, message = False, str(err)
-                        if _running(client):
-                            ok, message = True, 'started (its answer was lost; status says so)'
-                    if ok:
-                        break
-                    if time.monotonic() - t0 > 60.0 or mock.poll() is not None:
-                        raise RuntimeError(f'planner refused to start: {message}')
-                    time.sleep(0.2)
+                message = start_disentangling(client, planner, mock, say)
                 say(f'demo: start: {message}')
+                t0 = time.monotonic()           # the run's timeout counts from its start
                 while status.get('state') not in FINISHED:
                     if time.monotonic() - t0 > timeout:
                         raise TimeoutError(f'no outcome within {timeout:.0f} s')

@@ -230,6 +230,8 @@ class PlannerNode(Node):
         # compile (or load) every kernel a run calls now, not at ~/start or at the first block,
         # where it would hold the executor for seconds while the retreat must be watched
         # (short plans do: the anytime budget only repeats the same kernels)
+        self.get_logger().info('loading the planning kernels (the first start after an install '
+                               'compiles them: about two minutes on two cores)')
         compiling = time.perf_counter()
         warm_planner = self._make_planner(longest_plan=0.05)
         namesake = self._namesake()
