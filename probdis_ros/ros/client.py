@@ -60,7 +60,9 @@ class PlannerClient:
             while not client.service_is_ready():
                 if time.monotonic() > deadline:
                     raise TimeoutError(f'no {self.planner}/{service} service within '
-                                       f'{timeout:.0f} s; is the planner running?')
+                                       f'{timeout:.0f} s; is the planner running? (its first '
+                                       f'start after an install compiles its kernels for '
+                                       f'about two minutes)')
                 self.executor.spin_once(timeout_sec=0.05)
             future = client.call_async(Trigger.Request())
             while not future.done():
