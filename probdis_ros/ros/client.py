@@ -33,6 +33,9 @@ from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
 PLANNER = '/probdis_planner'
+#: Why a planner may be slow to offer its services (said by the client and the demo).
+FIRST_START = ("a planner's first start after an install compiles its kernels, about two "
+               'minutes on two cores; later starts take seconds')
 
 
 class PlannerClient:
@@ -60,9 +63,8 @@ class PlannerClient:
             while not client.service_is_ready():
                 if time.monotonic() > deadline:
                     raise TimeoutError(f'no {self.planner}/{service} service within '
-                                       f'{timeout:.0f} s; is the planner running? (its first '
-                                       f'start after an install compiles its kernels for '
-                                       f'about two minutes)')
+                                       f'{timeout:.0f} s; is the planner running? '
+                                       f'({FIRST_START})')
                 self.executor.spin_once(timeout_sec=0.05)
             future = client.call_async(Trigger.Request())
             while not future.done():

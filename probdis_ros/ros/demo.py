@@ -92,6 +92,8 @@ def start_disentangling(client, planner: subprocess.Popen, mock: subprocess.Pope
     startup_limit [s], saying why after tell_after), asks again for REFUSALS_FOR while it
     refuses, and raises RuntimeError if a node exits or the planner keeps refusing.
     """
+    from probdis_ros.ros.client import FIRST_START
+
     began = time.monotonic()
     answered_at = None
     told = False
@@ -117,8 +119,7 @@ def start_disentangling(client, planner: subprocess.Popen, mock: subprocess.Pope
         if now - began > startup_limit:
             raise RuntimeError(f'planner did not come up within {startup_limit:.0f} s: {message}')
         if not told and answered_at is None and now - began > tell_after:
-            say('demo: waiting for the planner to come up (its first start after an install '
-                'compiles the planning kernels, about two minutes; later starts take seconds)')
+            say(f'demo: waiting for the planner to come up ({FIRST_START})')
             told = True
         time.sleep(0.2)
 
