@@ -74,12 +74,14 @@ class EdgeCoster:
         self.terms = terms or EdgeTerms()
         self.c_fail = float(fmap.c_fail if self.terms.c_fail is None else self.terms.c_fail)
         dim = arm.task_space.dim
-        # points and directions padded to 3-D (z = 0 in 2-D); column-major, so that the
-        # kernels' bounds of all failures vectorise (edge_kernels._chunk_probabilities)
+        # points and directions padded to 3-D (z = 0 in 2-D); one row per coordinate
+        # (C-contiguous whatever the map's size: one numba type, so the kernels compile
+        # once, and the kernels' bounds of all failures vectorise)
+        rotations = quaternion_to_rotation(fmap.orientations).reshape(-1, 3, 3)
         self._failures = (
-            np.asfortranarray(_padded(fmap.points, dim)),
-            np.asfortranarray(_padded(fmap.directions, dim)),
-            np.asfortranarray(quaternion_to_rotation(fmap.orientations).reshape(-1, 3, 3)),
+            np.ascontiguousarray(_padded(fmap.points, dim).T),
+            np.ascontiguousarray(_padded(fmap.directions, dim).T),
+            np.ascontiguousarray(rotations.transpose(1, 2, 0)),
             (self.c_fail, 1.0 / self.terms.reach ** 2), bool(arm.task_space.has_orientation),
             bool(prune))
         self._arm = arm.kernel_params()

@@ -23,9 +23,10 @@ chunks: poses of a chunk, then their probabilities, then the running cost, so th
 that can no longer win stops early.  (Numba function calls with array arguments cost more
 than the arithmetic of one point, so no function is called per point.)
 
-Arm parameters as in :mod:`probdis_ros.model.kinematics`.  Failure parameters: points
-(F, 3), unit directions (F, 3) (z = 0 in 2-D), rotations (F, 3, 3) of the failure
-orientations, c_fail as the pair (C_FAIL, 1 / reach^2) (0: no reach, the paper's kernel),
+Arm parameters as in :mod:`probdis_ros.model.kinematics`.  Failure parameters, one row per
+coordinate (so that a map of any size has one numba type, C-contiguous, and a loop over the
+failures reads each coordinate contiguously): points (3, F), unit directions (3, F) (z = 0
+in 2-D), rotations (3, 3, F) of the failure orientations, c_fail as the pair (C_FAIL, 1 / reach^2) (0: no reach, the paper's kernel),
 and use_orient.
 """
 
@@ -42,6 +43,10 @@ from probdis_ros.model.kinematics import (
 
 #: [m] a pose this near a failure point is at it (where an edge may start: _start_probability)
 AT_FAILURE = 1e-6
+#: Along an edge (not at its start), a point is at a failure only exactly on it (near2 0),
+#: where cos alpha is -1 (alpha = pi, ratio 1), as in the paper (_failure_into)
+ALONG_NEAR2 = 0.0
+ALONG_AT_FAILURE = -1.0
 CHUNK = 16
 
 
@@ -90,7 +95,7 @@ SKIP_FROM = 4
 
 @numba.njit(cache=True, nogil=True, error_model='numpy')
 def _chunk_probabilities(pos, rot, count, f_points, f_dirs, f_rots, c_fail, use_orient, prune,
-                         soa, p_out, near2=0.0, at_failure=-1.0):
+                         soa, p_out, near2, at_failure):
     """
     Write max over failures of P_COORD * (1 - 0.5 D_ORIENT) for each pose of the chunk.
 
@@ -121,7 +126,7 @@ def _chunk_probabilities(pos, rot, count, f_points, f_dirs, f_rots, c_fail, use_
             soa[k, i] = pos[i, k]
         for k in range(9):
             soa[3 + k, i] = rot[i, k // 3, k % 3]
-    n_fail = f_points.shape[0]
+    n_fail = f_points.shape[1]
     if not prune or n_fail < SKIP_FROM or count < 2:
         for f in range(n_fail):
             _failure_into(f, count, soa, f_points, f_dirs, f_rots, c_fail, use_orient,
@@ -154,7 +159,7 @@ def _chunk_probabilities(pos, rot, count, f_points, f_dirs, f_rots, c_fail, use_
         spread = rotation_angle(least_trace)
     radius = np.sqrt(r2) * (1.0 + 1e-12) + 1e-12 + np.sqrt(near2)
     # every failure's bound, in one loop without branches that the compiler vectorises
-    # (the failure arrays are column-major: EdgeCoster); rows 12 and 13 of the workspace
+    # (the failure arrays hold one row per coordinate: EdgeCoster); rows 12 and 13 of the workspace
     # hold the bounds and the order of the failures left (workspace)
     bounds = soa[12]
     order = soa[13]
@@ -162,15 +167,15 @@ def _chunk_probabilities(pos, rot, count, f_points, f_dirs, f_rots, c_fail, use_
     m10, m11, m12 = soa[6, mid], soa[7, mid], soa[8, mid]
     m20, m21, m22 = soa[9, mid], soa[10, mid], soa[11, mid]
     for f in range(n_fail):
-        dx = f_points[f, 0] - cx
-        dy = f_points[f, 1] - cy
-        dz = f_points[f, 2] - cz
+        dx = f_points[0, f] - cx
+        dy = f_points[1, f] - cy
+        dz = f_points[2, f] - cz
         dist = np.sqrt(dx * dx + dy * dy + dz * dz)
         inverse = 1.0 / max(dist, 1e-300)
         gap = max(0.0, dist - radius)
         # alpha <= the center's + asin(x), x = radius / dist, and asin(x) <= x + (pi/2 - 1)
         # x^3 on [0, 1] ((asin(x) - x) / x^3 rises to pi/2 - 1 at 1)
-        cos_c = (f_dirs[f, 0] * dx + f_dirs[f, 1] * dy + f_dirs[f, 2] * dz) * inverse
+        cos_c = (f_dirs[0, f] * dx + f_dirs[1, f] * dy + f_dirs[2, f] * dz) * inverse
         x = min(1.0, radius * inverse)
         alpha = (arccos(min(1.0, max(-1.0, cos_c))) + x + ASIN_CUBE * x * x * x
                  + ANGLE_MARGIN)
@@ -178,9 +183,9 @@ def _chunk_probabilities(pos, rot, count, f_points, f_dirs, f_rots, c_fail, use_
         ratio = 1.0 if dist <= radius else ratio * ratio * ratio
         factor = 1.0
         if use_orient:
-            trace = (f_rots[f, 0, 0] * m00 + f_rots[f, 0, 1] * m01 + f_rots[f, 0, 2] * m02
-                     + f_rots[f, 1, 0] * m10 + f_rots[f, 1, 1] * m11 + f_rots[f, 1, 2] * m12
-                     + f_rots[f, 2, 0] * m20 + f_rots[f, 2, 1] * m21 + f_rots[f, 2, 2] * m22)
+            trace = (f_rots[0, 0, f] * m00 + f_rots[0, 1, f] * m01 + f_rots[0, 2, f] * m02
+                     + f_rots[1, 0, f] * m10 + f_rots[1, 1, f] * m11 + f_rots[1, 2, f] * m12
+                     + f_rots[2, 0, f] * m20 + f_rots[2, 1, f] * m21 + f_rots[2, 2, f] * m22)
             # the angle from trace = 1 + 2 cos(angle): one arccos, within ~5e-8 rad of the
             # kernel's half-angle form (below ANGLE_MARGIN)
             angle = arccos(min(1.0, max(-1.0, (trace - 1.0) * 0.5)))
@@ -286,8 +291,8 @@ def _failure_into(f, count, soa, f_points, f_dirs, f_rots, c_fail, use_orient, p
     """
     px, py, pz = soa[0], soa[1], soa[2]
     coord = soa[14]
-    fx, fy, fz = f_points[f, 0], f_points[f, 1], f_points[f, 2]
-    ux, uy, uz = f_dirs[f, 0], f_dirs[f, 1], f_dirs[f, 2]
+    fx, fy, fz = f_points[0, f], f_points[1, f], f_points[2, f]
+    ux, uy, uz = f_dirs[0, f], f_dirs[1, f], f_dirs[2, f]
     higher = 0
     # (at the failure itself, d2 <= near2, cos alpha is at_failure: -1 (alpha = pi, ratio 1)
     # as in the paper, +1 (behind it) for where a Hard edge starts)
@@ -307,9 +312,9 @@ def _failure_into(f, count, soa, f_points, f_dirs, f_rots, c_fail, use_orient, p
     # orientation: 1 - 0.5 D_ORIENT from trace(G^T R)
     r00, r01, r02, r10, r11, r12 = soa[3], soa[4], soa[5], soa[6], soa[7], soa[8]
     r20, r21, r22 = soa[9], soa[10], soa[11]
-    g = f_rots[f]
-    g00, g01, g02, g10, g11, g12 = g[0, 0], g[0, 1], g[0, 2], g[1, 0], g[1, 1], g[1, 2]
-    g20, g21, g22 = g[2, 0], g[2, 1], g[2, 2]
+    g00, g01, g02 = f_rots[0, 0, f], f_rots[0, 1, f], f_rots[0, 2, f]
+    g10, g11, g12 = f_rots[1, 0, f], f_rots[1, 1, f], f_rots[1, 2, f]
+    g20, g21, g22 = f_rots[2, 0, f], f_rots[2, 1, f], f_rots[2, 2, f]
     for i in range(count):
         trace = (g00 * r00[i] + g01 * r01[i] + g02 * r02[i] + g10 * r10[i] + g11 * r11[i]
                  + g12 * r12[i] + g20 * r20[i] + g21 * r21[i] + g22 * r22[i])
@@ -378,10 +383,11 @@ def _start_probability(cs, sn, n, kind, joint_params, offsets, bases, tip_offset
     alpha = pi would let a Hard edge run on through the obstacle, its probability falling.)
     """
     n_joints = cs.shape[0]
-    _chunk_poses(cs.copy(), sn.copy(), np.ones(n_joints), np.zeros(n_joints), cs, -1, 1, n,
+    one = np.int64(1)     # not a literal 1: a literal argument would compile a kernel again
+    _chunk_poses(cs.copy(), sn.copy(), np.ones(n_joints), np.zeros(n_joints), cs, -one, one, n,
                  kind, joint_params, offsets, bases, tip_offset, tip_rotation, pos, rot)
-    _chunk_probabilities(pos, rot, 1, f_points, f_dirs, f_rots, c_fail, use_orient, prune, soa,
-                         p_buf, AT_FAILURE ** 2, 1.0)
+    _chunk_probabilities(pos, rot, one, f_points, f_dirs, f_rots, c_fail, use_orient, prune,
+                         soa, p_buf, AT_FAILURE ** 2, 1.0)
     return p_buf[0]
 
 
@@ -408,7 +414,7 @@ def edge_cost_kernel(a, b, limit, delta, length_weight, risk_weight, cap, p_max,
     cost = length_weight * length
     if cost >= limit:
         return np.inf
-    if f_points.shape[0] == 0:
+    if f_points.shape[1] == 0:
         return cost
     weight = risk_weight * (length / n) / delta
     cs = np.empty(n_joints)
@@ -427,7 +433,7 @@ def edge_cost_kernel(a, b, limit, delta, length_weight, risk_weight, cap, p_max,
         _chunk_poses(cs, sn, cd, sd, b, k0, count, n, kind, joint_params, offsets, bases,
                      tip_offset, tip_rotation, pos, rot)
         _chunk_probabilities(pos, rot, count, f_points, f_dirs, f_rots, c_fail, use_orient, prune,
-                             soa, p_buf)
+                             soa, p_buf, ALONG_NEAR2, ALONG_AT_FAILURE)
         log_survival, highest = _chunk_log_survival(p_buf, count, p_max)
         if highest > cap:
             level = _descend(p_buf, count, cap, level)
@@ -453,7 +459,7 @@ def edge_costs_kernel(sources, target, base, limits, toward, delta, length_weigh
     """
     pos = np.empty((CHUNK, 3))
     rot = np.empty((CHUNK, 3, 3))
-    soa = workspace(f_points.shape[0])
+    soa = workspace(f_points.shape[1])
     p_buf = np.empty(CHUNK)
     for i in range(sources.shape[0]):
         a = sources[i] if toward else target
@@ -499,7 +505,7 @@ def cheapest_edge_kernel(sources, target, base, toward, delta, length_weight, ri
             length += (b[j] - a[j]) ** 2
         length = np.sqrt(length)
         bound[i] = base[i] + length_weight * length
-        if length == 0.0 or f_points.shape[0] == 0:
+        if length == 0.0 or f_points.shape[1] == 0:
             done[i] = True
             continue
         n = max(1, int(np.ceil(length / delta - 1e-12)))
@@ -510,7 +516,7 @@ def cheapest_edge_kernel(sources, target, base, toward, delta, length_weight, ri
             ends[i, j] = b[j]
     pos = np.empty((CHUNK, 3))
     rot = np.empty((CHUNK, 3, 3))
-    soa = workspace(f_points.shape[0])
+    soa = workspace(f_points.shape[1])
     p_buf = np.empty(CHUNK)
     if cap < np.inf:
         for i in range(m):
@@ -538,7 +544,7 @@ def cheapest_edge_kernel(sources, target, base, toward, delta, length_weight, ri
         _chunk_poses(cs[i], sn[i], cd[i], sd[i], ends[i], k_done[i], count, steps[i], kind,
                      joint_params, offsets, bases, tip_offset, tip_rotation, pos, rot)
         _chunk_probabilities(pos, rot, count, f_points, f_dirs, f_rots, c_fail, use_orient, prune,
-                             soa, p_buf)
+                             soa, p_buf, ALONG_NEAR2, ALONG_AT_FAILURE)
         k_done[i] += count
         log_survival, highest = _chunk_log_survival(p_buf, count, p_max)
         if highest > cap:

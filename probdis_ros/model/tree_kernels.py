@@ -191,7 +191,7 @@ def grow_kernel(nodes, positions, parent, edge, costs, first_child, next_sibling
     rot = np.empty((1, 3, 3))
     buf_pos = np.empty((CHUNK, 3))
     buf_rot = np.empty((CHUNK, 3, 3))
-    soa = workspace(f_points.shape[0])
+    soa = workspace(f_points.shape[1])
     p_buf = np.empty(CHUNK)
     for k in range(k_from, k_to):
         size = counts[0]
@@ -280,6 +280,7 @@ def connect_kernel(start_nodes, start_costs, goal_nodes, goal_costs, goal_first_
 
     Each goal-tree leaf is joined to its cheapest start-tree node (of its connect_k nearest).
     """
+    toward = np.bool_(True)   # not a literal True: that would compile the kernel again
     best_total = np.inf
     best_start = -1
     best_leaf = -1
@@ -290,7 +291,7 @@ def connect_kernel(start_nodes, start_costs, goal_nodes, goal_costs, goal_first_
                                    connect_k)
         i, total = cheapest_edge_kernel(
             start_nodes[candidates], goal_nodes[leaf], start_costs[candidates] + goal_costs[leaf],
-            True, delta, length_weight, risk_weight, cap, p_max, kind, joint_params, offsets,
+            toward, delta, length_weight, risk_weight, cap, p_max, kind, joint_params, offsets,
             bases, tip_offset, tip_rotation, f_points, f_dirs, f_rots, c_fail, use_orient, prune)
         if total < best_total:
             best_total = total
