@@ -72,7 +72,7 @@ def test_service_commands_against_a_running_planner(env, tmp_path):
 
 
 def test_the_demo_waits_for_a_planner_still_coming_up_and_stops_when_it_dies(env, monkeypatch):
-    # a fresh install's planner compiles its kernels for about two minutes before its
+    # a fresh install's planner compiles its kernels for about 40 s before its
     # service is up: the demo waits for it while it lives, and says why
     from probdis_ros.ros.client import PlannerClient
     from probdis_ros.ros.demo import start_disentangling
@@ -96,6 +96,66 @@ def test_the_demo_waits_for_a_planner_still_coming_up_and_stops_when_it_dies(env
     finally:
         alive.kill()
         alive.wait(10)
+
+
+def test_the_demo_takes_a_start_whose_answer_was_lost_from_the_status(env, monkeypatch):
+    # DDS may drop the answer of a service that has only just come up: the start took effect
+    # (the status shows the run a moment later) and asking again would only be refused
+    import threading
+
+    from probdis_ros.ros.client import PlannerClient
+    from probdis_ros.ros.demo import start_disentangling
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.qos import DurabilityPolicy, QoSProfile
+    from std_msgs.msg import String
+    from std_srvs.srv import Trigger
+
+    for name in ('ROS_DOMAIN_ID', 'ROS_AUTOMATIC_DISCOVERY_RANGE'):
+        monkeypatch.setenv(name, env[name])
+    context = Context()
+    rclpy.init(context=context)
+    node = rclpy.create_node('probdis_planner', context=context)
+    status = node.create_publisher(String, '~/status', QoSProfile(
+        depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    status.publish(String(data=json.dumps({'state': 'idle'})))
+    calls = []
+
+    def publish_planning():
+        status.publish(String(data=json.dumps({'state': 'planning'})))
+
+    def on_start(request, response):
+        calls.append(time.monotonic())
+        if len(calls) > 1:
+            response.success, response.message = False, 'a run is already active'
+            return response
+        # the run starts, but its status comes after the client gave up on the answer
+        threading.Timer(1.5, publish_planning).start()
+        time.sleep(3.0)
+        response.success, response.message = True, 'disentangling'
+        return response
+
+    node.create_service(Trigger, '~/start', on_start)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    spinner = threading.Thread(target=executor.spin, daemon=True)
+    spinner.start()
+    alive = subprocess.Popen([sys.executable, '-c', 'import time; time.sleep(120)'])
+    try:
+        with PlannerClient() as client:
+            assert client.status(timeout=10.0)['state'] == 'idle'    # seen before the start
+            message = start_disentangling(client, alive, alive, lambda *a: None,
+                                          startup_limit=30.0, call_timeout=1.0)
+        assert 'answer was lost' in message
+        time.sleep(3.0)        # a second request would be served once the first one is done
+        assert len(calls) == 1               # started once, not asked again and refused
+    finally:
+        alive.kill()
+        alive.wait(10)
+        executor.shutdown()
+        node.destroy_node()
+        context.try_shutdown()
 
 
 def test_demo_disentangles_through_two_processes_and_its_bag_replays_the_same(env, tmp_path):

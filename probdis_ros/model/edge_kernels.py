@@ -26,8 +26,8 @@ than the arithmetic of one point, so no function is called per point.)
 Arm parameters as in :mod:`probdis_ros.model.kinematics`.  Failure parameters, one row per
 coordinate (so that a map of any size has one numba type, C-contiguous, and a loop over the
 failures reads each coordinate contiguously): points (3, F), unit directions (3, F) (z = 0
-in 2-D), rotations (3, 3, F) of the failure orientations, c_fail as the pair (C_FAIL, 1 / reach^2) (0: no reach, the paper's kernel),
-and use_orient.
+in 2-D), rotations (3, 3, F) of the failure orientations, c_fail as the pair (C_FAIL,
+1 / reach^2) (0: no reach, the paper's kernel), and use_orient.
 """
 
 import numba

@@ -34,8 +34,12 @@ from std_srvs.srv import Trigger
 
 PLANNER = '/probdis_planner'
 #: Why a planner may be slow to offer its services (said by the client and the demo).
-FIRST_START = ("a planner's first start after an install compiles its kernels, about two "
-               'minutes on two cores; later starts take seconds')
+FIRST_START = ("a planner's first start after an install compiles its kernels, about 40 s "
+               'on two cores; later starts take seconds')
+
+
+class NoAnswerError(TimeoutError):
+    """A request reached the service but no answer came back: it may have taken effect."""
 
 
 class PlannerClient:
@@ -56,7 +60,12 @@ class PlannerClient:
         self.latest = json.loads(msg.data)
 
     def call(self, service: str, timeout: float = 10.0) -> tuple[bool, str]:
-        """Call ``<planner>/<service>`` (std_srvs/Trigger); TimeoutError if no answer."""
+        """
+        Call ``<planner>/<service>`` (std_srvs/Trigger), waiting up to timeout for each step.
+
+        TimeoutError if the service is not there within timeout [s]; :class:`NoAnswerError`
+        if it was called but its answer did not come within timeout of the call.
+        """
         client = self.node.create_client(Trigger, f'{self.planner}/{service}')
         try:
             deadline = time.monotonic() + timeout
@@ -66,11 +75,14 @@ class PlannerClient:
                                        f'{timeout:.0f} s; is the planner running? '
                                        f'({FIRST_START})')
                 self.executor.spin_once(timeout_sec=0.05)
+            # the answer has its own time: a service that came up just before the deadline
+            # has not had the time to answer (it did not answer is not it was not called)
+            deadline = time.monotonic() + timeout
             future = client.call_async(Trigger.Request())
             while not future.done():
                 if time.monotonic() > deadline:
-                    raise TimeoutError(f'{self.planner}/{service} did not answer within '
-                                       f'{timeout:.0f} s')
+                    raise NoAnswerError(f'{self.planner}/{service} did not answer within '
+                                        f'{timeout:.0f} s')
                 self.executor.spin_once(timeout_sec=0.05)
             response = future.result()
             return bool(response.success), response.message
