@@ -62,7 +62,7 @@ from probdis_ros.planning.warm_up import warm_up
 from probdis_ros.ros.markers import markers_msg
 from probdis_ros.ros.messages import stamp_seconds, trajectory_msg
 from probdis_ros.ros.node_main import run_node
-from probdis_ros.ros.recorder import BagRecorder
+from probdis_ros.ros.recorder import BagRecorder, message_types
 from probdis_ros.run import (
     Learned,
     PlanCancelledError,
@@ -243,6 +243,7 @@ class PlannerNode(Node):
         self.map_writable = True
         self.fmap = self._load_map()
         warm_up(self.arm, warm_planner, float(self.get_parameter('c_fail').value))
+        message_types()                   # and the bag's, which the first ~/start opens
         self.get_logger().info(
             f'planner kernels ready in {time.perf_counter() - compiling:.1f} s')
         self.state_check = StateCheck(self.joint_names, self.arm.lower, self.arm.upper,
