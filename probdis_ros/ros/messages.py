@@ -23,6 +23,8 @@ itself, limits, time and jumps, are :mod:`probdis_ros.motion.state_check`).
 
 from __future__ import annotations
 
+from array import array
+
 from builtin_interfaces.msg import Duration
 import numpy as np
 from probdis_ros.motion.jtc import TrajectoryCommand
@@ -57,18 +59,34 @@ def to_seconds(d: Duration) -> float:
 
 
 def trajectory_msg(command: TrajectoryCommand, joint_names: list[str]) -> JointTrajectory:
-    """Build a JointTrajectory of every joint; fields a point lacks are left empty."""
+    """
+    Build a JointTrajectory of every joint; fields a point lacks are left empty.
+
+    Built column by column (one conversion per field, arrays the message takes as they
+    are): a command has a point every controller period, 1,300 for a 13 s motion, and
+    building them value by value held the executor for 26-58 ms.  Each point's
+    time_from_start is :func:`duration`'s, to the nanosecond.
+    """
     msg = JointTrajectory()
     msg.joint_names = list(joint_names)
-    for k, t in enumerate(command.times):
-        p = JointTrajectoryPoint()
-        p.positions = [float(v) for v in command.positions[k]]
-        for name in ('velocities', 'accelerations'):
-            values = command.field(name, k)
-            if values is not None:
-                setattr(p, name, [float(v) for v in values])
-        p.time_from_start = duration(float(t))
-        msg.points.append(p)
+    nanoseconds = np.round(np.asarray(command.times, dtype=float) * 1e9).astype(np.int64)
+    seconds, nanos = (part.tolist() for part in np.divmod(nanoseconds, 1_000_000_000))
+    columns = []
+    for name in ('positions', 'velocities', 'accelerations'):
+        values = getattr(command, name)
+        if values is not None:
+            values = np.asarray(values, dtype=float)
+            carried = [True] * len(values) if name == 'positions' else \
+                (~np.isnan(values).any(axis=1)).tolist()
+            columns.append((name, [array('d', row) for row in values.tolist()], carried))
+    points = []
+    for k in range(len(seconds)):
+        point = JointTrajectoryPoint(time_from_start=Duration(sec=seconds[k], nanosec=nanos[k]))
+        for name, rows, carried in columns:
+            if carried[k]:
+                setattr(point, name, rows[k])
+        points.append(point)
+    msg.points = points
     return msg
 
 
