@@ -84,6 +84,28 @@ def test_the_compiled_loop_plans_as_the_python_loop_on_large_maps_and_at_the_lim
                        start, goal, fmap, seeds=range(2))
 
 
+def test_maps_of_every_size_and_both_objectives_share_one_compiled_kernel():
+    # numba compiles a kernel once per argument types: failure arrays whose layout changed
+    # with the map's size (one failure's both C- and F-contiguous) and literal arguments
+    # between kernels compiled each up to six times; a first start took 141 s instead of 40
+    from probdis_ros.model import edge_kernels, tree_kernels
+
+    kernels = (tree_kernels.grow_kernel, tree_kernels.connect_kernel,
+               edge_kernels.cheapest_edge_kernel, edge_kernels.edge_costs_kernel,
+               edge_kernels.edge_cost_kernel, edge_kernels._chunk_probabilities)
+    rng = np.random.default_rng(5)
+    start, goal = ARM.random_configurations(rng, 2)
+    paper = ProbRRT(ARM, RRTSettings(iterations=10))
+    paper.plan(start, goal, scattered_map(ARM, rng, 5), rng)
+    before = [len(kernel.signatures) for kernel in kernels]
+    hard = ProbRRT(ARM, RRTSettings(iterations=10), HardThresholdObjective(0.01))
+    for failures in (0, 1, 2, 19):
+        fmap = scattered_map(ARM, rng, failures) if failures else FailureMap(ARM.task_space)
+        for planner in (paper, hard):
+            planner.plan(start, goal, fmap, rng)
+    assert [len(kernel.signatures) for kernel in kernels] == before
+
+
 def test_pruning_far_failures_changes_no_cost_and_no_plan():
     rng = np.random.default_rng(22)
     for failures in (5, 19, 150, 400):
