@@ -124,6 +124,9 @@ def test_the_controller_commands_one_period_ahead_and_a_new_message_replaces_the
 def test_refuses_times_that_do_not_increase_and_shapes_that_do_not_match():
     with pytest.raises(ValueError, match='increasing'):
         one_joint([1.0, 1.0], [0.0, 1.0])
+    for bad in (np.nan, np.inf):           # NaN compares false: it passed the order check
+        with pytest.raises(ValueError, match='finite'):
+            one_joint([1.0, bad], [0.0, 1.0])
     with pytest.raises(ValueError, match='shape'):
         TrajectoryCommand(np.array([1.0]), np.zeros((1, 2)), np.zeros((1, 3)))
 

@@ -280,9 +280,10 @@ class SerialChainArm(Arm):
         if self._kernel_params is None:
             codes = self._axis_codes()
             kind = CHAIN if codes is None else AXIS_CHAIN
-            self._kernel_params = (kind, np.zeros(0) if codes is None else codes,
-                                   self._offsets, self._bases, self._tip_offset,
-                                   self._tip_rotation)
+            # C-contiguous, as every other arm's: one numba type, one compile per kernel
+            arrays = (np.zeros(0) if codes is None else codes, self._offsets, self._bases,
+                      self._tip_offset, self._tip_rotation)
+            self._kernel_params = (kind, *(np.ascontiguousarray(a) for a in arrays))
         return self._kernel_params
 
     def _axis_codes(self) -> np.ndarray | None:

@@ -66,6 +66,8 @@ class TrajectoryCommand:
         positions = np.atleast_2d(np.asarray(self.positions, dtype=float))
         if len(times) == 0 or len(times) != len(positions):
             raise ValueError(f'{len(times)} times for {len(positions)} points')
+        if not np.all(np.isfinite(times)):
+            raise ValueError('time_from_start must be finite')
         if np.any(np.diff(times) <= 0) or times[0] < 0:
             raise ValueError('time_from_start must be non-negative and strictly increasing')
         object.__setattr__(self, 'times', times)

@@ -45,8 +45,8 @@ def warm_up(arm: Arm, planner: Planner, c_fail: float) -> float:
         blocked_at = path[0] + 0.5 * (path[1] - path[0])
         back = loop.report_blocked(blocked_at, 0)
         loop.report_retreated(back[-1])
-        # numba specialises on array layout: a map of one failure (its arrays both C- and
-        # F-contiguous) and one of several are different kernels; plan with both
+        # a map of one failure and one of several: both share one compiled kernel (the
+        # failure arrays' layout does not change with the map's size), planned on as a run does
         if loop.next_path(back[-1]) is not None:
             loop.withdraw()
         loop.learn(blocked_at, path[1] - path[0])

@@ -82,7 +82,8 @@ class PlannerClient:
             while not future.done():
                 if time.monotonic() > deadline:
                     raise NoAnswerError(f'{self.planner}/{service} did not answer within '
-                                        f'{timeout:.0f} s')
+                                        f'{timeout:.0f} s; the call may have taken effect '
+                                        f'(probdis status tells)')
                 self.executor.spin_once(timeout_sec=0.05)
             response = future.result()
             return bool(response.success), response.message

@@ -108,22 +108,22 @@ def start_disentangling(client, planner: subprocess.Popen, mock: subprocess.Pope
 
     began = time.monotonic()
     answered_at = None
-    told = False
+    told = lost = False
     while True:
         try:
             ok, message = client.call('start', timeout=call_timeout)
             answered_at = answered_at or time.monotonic()
         except NoAnswerError as err:
-            # DDS can drop an answer while it still matches the new client; the status says
-            # whether the start took effect (asking again would be refused: a run is active)
-            ok, message = _started(client), str(err)
-            if ok:
-                message = 'started (its answer was lost; the status says so)'
+            ok, message, lost = False, str(err), True
             answered_at = answered_at or time.monotonic()
         except TimeoutError as err:
             ok, message = False, str(err)
         if ok:
             return message
+        # DDS can drop an answer while it still matches the new client: whether that start
+        # took effect, the status says (asked again, the planner refuses: a run is active)
+        if lost and _started(client):
+            return 'started (its answer was lost; the status says so)'
         for name, process in (('planner', planner), ('mock iiwa', mock)):
             if process.poll() is not None:
                 raise RuntimeError(f'the {name} exited (code {process.returncode}) before the '
