@@ -20,7 +20,6 @@ from pathlib import Path
 import signal
 import subprocess
 import sys
-import time
 
 from conftest import probdis_command
 import numpy as np
@@ -373,9 +372,10 @@ def test_publish_mode_delivers_every_message_in_order_with_its_timing(tmp_path):
         for topic, cls in ((JS, JointState), (TRAJ, JointTrajectory), (status, String)):
             qos = QoSProfile(depth=1000, durability=DurabilityPolicy.TRANSIENT_LOCAL
                              if topic == status else DurabilityPolicy.VOLATILE)
+            # timed on arrival in DDS, not when this process's executor gets to the message
             listener.create_subscription(
-                cls, topic, lambda raw, topic=topic: received.setdefault(topic, []).append(
-                    (time.monotonic(), bytes(raw))), qos, raw=True)
+                cls, topic, lambda raw, info, topic=topic: received.setdefault(topic, []).append(
+                    (info['received_timestamp'] * 1e-9, bytes(raw))), qos, raw=True)
         env = dict(os.environ, ROS_DOMAIN_ID=str(ros.domain))
         rate = 4.0
         result = subprocess.run([*probdis_command(), 'replay', str(tmp_path / 'bag'),
