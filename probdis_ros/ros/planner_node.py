@@ -234,16 +234,14 @@ class PlannerNode(Node):
                                'compiles them: about 40 s on two cores)')
         compiling = time.perf_counter()
         warm_planner = self._make_planner(longest_plan=0.05)
-        namesake = self._namesake()
-        if namesake:                      # in this process: the graph is complete at once
-            Node.destroy_node(self)
-            raise ValueError(namesake + '; not starting a second one')
+        self._refuse_namesake()           # in this process: the graph is complete at once
+        warm_up(self.arm, warm_planner, float(self.get_parameter('c_fail').value))
+        message_types()                   # and the bag's, which the first ~/start opens
+        self._refuse_namesake()           # another process's: discovery has had more time
         self.errors: dict[str, str] = {}      # recording: set and read in the executor thread
         self.map_error = ''                    # set by the I/O thread
         self.map_writable = True
         self.fmap = self._load_map()
-        warm_up(self.arm, warm_planner, float(self.get_parameter('c_fail').value))
-        message_types()                   # and the bag's, which the first ~/start opens
         self.get_logger().info(
             f'planner kernels ready in {time.perf_counter() - compiling:.1f} s')
         self.state_check = StateCheck(self.joint_names, self.arm.lower, self.arm.upper,
@@ -311,6 +309,13 @@ class PlannerNode(Node):
         self.create_timer(1.0, self._publish_diagnostics)
         self._publish_status()
         self.get_logger().info(f'{NODE_NAME} ready: {len(self.fmap)} failures in the map')
+
+    def _refuse_namesake(self) -> None:
+        """Raise ValueError (exit 2) if the graph shows a namesake, before the map is read."""
+        namesake = self._namesake()
+        if namesake:
+            Node.destroy_node(self)
+            raise ValueError(namesake + '; not starting a second one')
 
     def _namesake(self) -> str:
         """Return what is wrong when the graph shows another node of this name ('' if not)."""
