@@ -64,13 +64,11 @@ def trajectory_msg(command: TrajectoryCommand, joint_names: list[str]) -> JointT
 
     Built column by column (one conversion per field, arrays the message takes as they
     are): a command has a point every controller period, 1,300 for a 13 s motion, and
-    building them value by value held the executor for 26-58 ms.  Each point's
-    time_from_start is :func:`duration`'s, to the nanosecond.
+    building them value by value held the executor for 26-58 ms.
     """
     msg = JointTrajectory()
     msg.joint_names = list(joint_names)
-    nanoseconds = np.round(np.asarray(command.times, dtype=float) * 1e9).astype(np.int64)
-    seconds, nanos = (part.tolist() for part in np.divmod(nanoseconds, 1_000_000_000))
+    times = np.asarray(command.times, dtype=float).tolist()
     columns = []
     for name in ('positions', 'velocities', 'accelerations'):
         values = getattr(command, name)
@@ -80,8 +78,8 @@ def trajectory_msg(command: TrajectoryCommand, joint_names: list[str]) -> JointT
                 (~np.isnan(values).any(axis=1)).tolist()
             columns.append((name, [array('d', row) for row in values.tolist()], carried))
     points = []
-    for k in range(len(seconds)):
-        point = JointTrajectoryPoint(time_from_start=Duration(sec=seconds[k], nanosec=nanos[k]))
+    for k, t in enumerate(times):
+        point = JointTrajectoryPoint(time_from_start=duration(t))
         for name, rows, carried in columns:
             if carried[k]:
                 setattr(point, name, rows[k])
