@@ -372,3 +372,41 @@ def test_an_interrupted_run_keeps_its_map_for_the_next_start(ros, tmp_path):
     assert ros.call('stop').success
     wait_for(lambda: finished(ros), 5, 'the stop')
     assert ros.call('start').success and ros.status['failures'] == 1
+
+
+FROZEN_NODE = """
+import gc
+import sys
+from probdis_ros.ros.node_main import run_node
+from rclpy.node import Node
+
+
+def factory():
+    node = Node('frozen_check')
+
+    def look():
+        print(gc.get_freeze_count(), len(gc.get_objects()), flush=True)
+        raise KeyboardInterrupt
+
+    node.create_timer(0.01, look)
+    return node
+
+
+sys.exit(run_node('frozen_check', factory))
+"""
+
+
+def test_a_node_process_spins_with_its_start_up_objects_left_out_of_collections(ros):
+    """
+    What start-up built is frozen: a full collection no longer walks it.
+
+    In the planner a full collection walked the kernels and libraries for 50-110 ms when a
+    long path's message was built; on simulated time at 5x the mock ran half a second on
+    meanwhile, and the arm, which had not yet received the path, was judged never to move.
+    """
+    env = dict(os.environ, ROS_DOMAIN_ID=str(ros.domain))
+    done = subprocess.run([sys.executable, '-c', FROZEN_NODE], capture_output=True, text=True,
+                          env=env, timeout=60)
+    assert done.returncode == 0, done.stderr
+    frozen, walked = map(int, done.stdout.split())
+    assert frozen > 10 * walked, (frozen, walked)

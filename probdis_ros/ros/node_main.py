@@ -17,6 +17,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable
+import gc
 import sys
 
 import rclpy
@@ -54,6 +55,12 @@ def run_node(name: str, factory: Callable[[], Node], args: list[str] | None = No
     node = None
     try:
         node = factory()
+        # what start-up built (modules, compiled kernels, the node) lives as long as the
+        # process: frozen, it is left out of every later full garbage collection, which
+        # walked all of it and held the executor for 50-110 ms at a time (in the planner,
+        # when the message of a long path was built: the arm's states waited behind it)
+        gc.collect()
+        gc.freeze()
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass                 # SIGINT / SIGTERM: cleaned up below
