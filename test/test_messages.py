@@ -15,10 +15,13 @@
 
 """Trajectory commands through their ROS message and back: every point, every field."""
 
+import math
+
 import numpy as np
 from probdis_ros.model import iiwa_arm
 from probdis_ros.motion.jtc import TrajectoryCommand
 from probdis_ros.ros.messages import command_from_msg, duration, trajectory_msg
+import pytest
 
 JOINTS = [f'lbr_A{i}' for i in range(1, 8)]
 
@@ -43,3 +46,60 @@ def test_a_command_goes_through_its_message_unchanged_point_by_point():
     assert np.allclose(back.times, times, rtol=0, atol=1e-9)
     assert np.array_equal(back.velocities, velocities, equal_nan=True)
     assert back.accelerations is None or np.isnan(back.accelerations).all()
+
+
+def five_points():
+    """Return a valid message of five points with positions, velocities and accelerations."""
+    arm = iiwa_arm()
+    rng = np.random.default_rng(5)
+    positions = rng.uniform(arm.lower, arm.upper, size=(5, 7))
+    command = TrajectoryCommand(np.arange(1, 6) * 0.1, positions, rng.normal(size=(5, 7)),
+                                rng.normal(size=(5, 7)))
+    return arm, trajectory_msg(command, JOINTS)
+
+
+def bad(k, name, values):
+    return lambda msg: setattr(msg.points[k], name, values)
+
+
+NAN7 = [math.nan] * 7
+
+
+@pytest.mark.parametrize('changes, reason', [
+    ([bad(0, 'positions', [0.0] * 6)], 'point 0 has 6 positions for 7 joints'),
+    ([bad(3, 'positions', [0.0] * 6), bad(1, 'velocities', NAN7)],
+     'point 1 has non-finite velocities'),
+    ([bad(2, 'velocities', [0.0] * 3), bad(2, 'positions', NAN7)], 'point 2 is not finite'),
+    ([bad(4, 'accelerations', [0.0] * 8), bad(2, 'positions', [3.0] * 7)],
+     'point 2 is outside the joint limits'),
+    ([bad(4, 'accelerations', [0.0] * 8)], 'point 4 has 8 accelerations for 7 joints'),
+    ([bad(3, 'accelerations', [math.inf] * 7), bad(3, 'velocities', [0.0] * 2)],
+     'point 3 has 2 velocities for 7 joints'),
+])
+def test_a_command_is_refused_for_its_first_points_first_problem(changes, reason):
+    arm, msg = five_points()
+    for change in changes:
+        change(msg)
+    with pytest.raises(ValueError) as refused:
+        command_from_msg(msg, JOINTS, arm.lower, arm.upper)
+    assert str(refused.value) == reason
+
+
+def test_joints_are_taken_by_name_and_others_ignored():
+    arm, msg = five_points()
+    expected = command_from_msg(msg, JOINTS, arm.lower, arm.upper)
+    order = [6, 0, 5, 1, 4, 2, 3]
+    msg.joint_names = [JOINTS[j] for j in order] + ['gripper']
+    for point in msg.points:
+        for name in ('positions', 'velocities', 'accelerations'):
+            values = list(getattr(point, name))
+            setattr(point, name, [values[j] for j in order] + [math.nan])
+    msg.points[2].velocities = []                  # a point without velocities
+    back = command_from_msg(msg, JOINTS, arm.lower, arm.upper)
+    assert np.array_equal(back.positions, expected.positions)
+    assert np.isnan(back.velocities[2]).all()
+    assert np.array_equal(np.delete(back.velocities, 2, axis=0),
+                          np.delete(expected.velocities, 2, axis=0))
+    with pytest.raises(ValueError, match='lacks joints lbr_A7'):
+        msg.joint_names = ['other', *msg.joint_names[1:]]       # lbr_A7 was first
+        command_from_msg(msg, JOINTS, arm.lower, arm.upper)
