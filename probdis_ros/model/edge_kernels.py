@@ -114,11 +114,12 @@ def _chunk_probabilities(pos, rot, count, f_points, f_dirs, f_rots, c_fail, use_
     the middle pose's minus the spread), with margins above the kernel's rounding; the
     bounds of all failures are computed in one vectorised loop (with cheap upper bounds of
     asin and of the rotation angle, ``ASIN_CUBE``).  The failure of the highest bound goes
-    first, then the others still above the least maximum, highest first when they are few,
-    so that the maximum rises early.  The result is the same number, bit for bit, as
-    evaluating every failure: a maximum does not depend on the order, nor on values that
-    do not win (``prune`` False evaluates them all, for the checks).  ``soa`` is the
-    :func:`workspace` of the map.
+    first, so that the maximum rises early, then the others in order, each only if its
+    bound is still above the least maximum (one loop: one inlined copy of the evaluation
+    to compile; sorting the others by bound made no plan faster).  The result is the same
+    number, bit for bit, as evaluating every failure: a maximum does not depend on the
+    order, nor on values that do not win (``prune`` False evaluates them all, for the
+    checks).  ``soa`` is the :func:`workspace` of the map.
     """
     for i in range(count):
         p_out[i] = 0.0
@@ -127,13 +128,71 @@ def _chunk_probabilities(pos, rot, count, f_points, f_dirs, f_rots, c_fail, use_
         for k in range(9):
             soa[3 + k, i] = rot[i, k // 3, k % 3]
     n_fail = f_points.shape[1]
-    if not prune or n_fail < SKIP_FROM or count < 2:
+    pruned = prune and n_fail >= SKIP_FROM and count >= 2
+    first = 0
+    if pruned:
+        # the chunk's bounding sphere and every failure's bound, in one loop without
+        # branches that the compiler vectorises (the failure arrays hold one row per
+        # coordinate: EdgeCoster); row 12 of the workspace holds the bounds
+        bounds = soa[12]
+        cx, cy, cz, radius, mid, spread = _sphere(soa, count, use_orient, near2)
+        m00, m01, m02 = soa[3, mid], soa[4, mid], soa[5, mid]
+        m10, m11, m12 = soa[6, mid], soa[7, mid], soa[8, mid]
+        m20, m21, m22 = soa[9, mid], soa[10, mid], soa[11, mid]
         for f in range(n_fail):
-            _failure_into(f, count, soa, f_points, f_dirs, f_rots, c_fail, use_orient,
-                          p_out, near2, at_failure)
-        return
-    # the chunk's bounding sphere (center: mean point) and, about its middle pose's
-    # rotation, the largest rotation angle of its poses
+            dx = f_points[0, f] - cx
+            dy = f_points[1, f] - cy
+            dz = f_points[2, f] - cz
+            dist = np.sqrt(dx * dx + dy * dy + dz * dz)
+            inverse = 1.0 / max(dist, 1e-300)
+            gap = max(0.0, dist - radius)
+            # alpha <= the center's + asin(x), x = radius / dist, and asin(x) <= x +
+            # (pi/2 - 1) x^3 on [0, 1] ((asin(x) - x) / x^3 rises to pi/2 - 1 at 1)
+            cos_c = (f_dirs[0, f] * dx + f_dirs[1, f] * dy + f_dirs[2, f] * dz) * inverse
+            x = min(1.0, radius * inverse)
+            alpha = (arccos(min(1.0, max(-1.0, cos_c))) + x + ASIN_CUBE * x * x * x
+                     + ANGLE_MARGIN)
+            ratio = min(1.0, alpha * INV_PI)
+            ratio = 1.0 if dist <= radius else ratio * ratio * ratio
+            factor = 1.0
+            if use_orient:
+                trace = (f_rots[0, 0, f] * m00 + f_rots[0, 1, f] * m01
+                         + f_rots[0, 2, f] * m02 + f_rots[1, 0, f] * m10
+                         + f_rots[1, 1, f] * m11 + f_rots[1, 2, f] * m12
+                         + f_rots[2, 0, f] * m20 + f_rots[2, 1, f] * m21
+                         + f_rots[2, 2, f] * m22)
+                # the angle from trace = 1 + 2 cos(angle): one arccos, within ~5e-8 rad
+                # of the kernel's half-angle form (below ANGLE_MARGIN)
+                angle = arccos(min(1.0, max(-1.0, (trace - 1.0) * 0.5)))
+                factor = 1.0 - 0.5 * max(0.0, angle - spread - ANGLE_MARGIN) * INV_PI
+            taper = max(0.0, 1.0 - gap * gap * c_fail[1])
+            bounds[f] = ((1.0 + 1e-9) * ratio * factor * (taper * taper)
+                         / (1.0 + c_fail[0] * gap * gap))
+        for f in range(n_fail):
+            if bounds[f] > bounds[first]:
+                first = f
+    # the failure of the highest bound first, then the others in order, each only while its
+    # bound exceeds the least maximum so far (no point starts above 0)
+    least = 0.0 if pruned else -1.0
+    for slot in range(n_fail):
+        f = first if slot == 0 else slot - 1 if slot <= first else slot
+        if pruned and bounds[f] <= least:
+            continue
+        _failure_into(f, count, soa, f_points, f_dirs, f_rots, c_fail, use_orient, p_out,
+                      near2, at_failure)
+        if pruned:
+            least = _least(p_out, count)
+
+
+@numba.njit(cache=True, inline='always')
+def _sphere(soa, count, use_orient, near2):
+    """
+    Return (cx, cy, cz, radius, mid, spread) of a chunk's poses in the workspace.
+
+    Their bounding sphere about the mean point (the radius widened by margins above the
+    rounding and by sqrt(near2)) and, about the middle pose's rotation, the largest
+    rotation angle among them (0 without orientation).
+    """
     cx = cy = cz = 0.0
     for i in range(count):
         cx += soa[0, i]
@@ -143,10 +202,10 @@ def _chunk_probabilities(pos, rot, count, f_points, f_dirs, f_rots, c_fail, use_
     cy /= count
     cz /= count
     r2 = 0.0
-    mid = count // 2
-    spread = 0.0
     for i in range(count):
         r2 = max(r2, (soa[0, i] - cx) ** 2 + (soa[1, i] - cy) ** 2 + (soa[2, i] - cz) ** 2)
+    mid = count // 2
+    spread = 0.0
     if use_orient:
         # the angle falls as the trace rises: the largest angle is the least trace's (to
         # rounding, far below ANGLE_MARGIN), one arccos instead of one per pose
@@ -158,72 +217,7 @@ def _chunk_probabilities(pos, rot, count, f_points, f_dirs, f_rots, c_fail, use_
             least_trace = min(least_trace, trace)
         spread = rotation_angle(least_trace)
     radius = np.sqrt(r2) * (1.0 + 1e-12) + 1e-12 + np.sqrt(near2)
-    # every failure's bound, in one loop without branches that the compiler vectorises
-    # (the failure arrays hold one row per coordinate: EdgeCoster); rows 12 and 13 of the workspace
-    # hold the bounds and the order of the failures left (workspace)
-    bounds = soa[12]
-    order = soa[13]
-    m00, m01, m02 = soa[3, mid], soa[4, mid], soa[5, mid]
-    m10, m11, m12 = soa[6, mid], soa[7, mid], soa[8, mid]
-    m20, m21, m22 = soa[9, mid], soa[10, mid], soa[11, mid]
-    for f in range(n_fail):
-        dx = f_points[0, f] - cx
-        dy = f_points[1, f] - cy
-        dz = f_points[2, f] - cz
-        dist = np.sqrt(dx * dx + dy * dy + dz * dz)
-        inverse = 1.0 / max(dist, 1e-300)
-        gap = max(0.0, dist - radius)
-        # alpha <= the center's + asin(x), x = radius / dist, and asin(x) <= x + (pi/2 - 1)
-        # x^3 on [0, 1] ((asin(x) - x) / x^3 rises to pi/2 - 1 at 1)
-        cos_c = (f_dirs[0, f] * dx + f_dirs[1, f] * dy + f_dirs[2, f] * dz) * inverse
-        x = min(1.0, radius * inverse)
-        alpha = (arccos(min(1.0, max(-1.0, cos_c))) + x + ASIN_CUBE * x * x * x
-                 + ANGLE_MARGIN)
-        ratio = min(1.0, alpha * INV_PI)
-        ratio = 1.0 if dist <= radius else ratio * ratio * ratio
-        factor = 1.0
-        if use_orient:
-            trace = (f_rots[0, 0, f] * m00 + f_rots[0, 1, f] * m01 + f_rots[0, 2, f] * m02
-                     + f_rots[1, 0, f] * m10 + f_rots[1, 1, f] * m11 + f_rots[1, 2, f] * m12
-                     + f_rots[2, 0, f] * m20 + f_rots[2, 1, f] * m21 + f_rots[2, 2, f] * m22)
-            # the angle from trace = 1 + 2 cos(angle): one arccos, within ~5e-8 rad of the
-            # kernel's half-angle form (below ANGLE_MARGIN)
-            angle = arccos(min(1.0, max(-1.0, (trace - 1.0) * 0.5)))
-            factor = 1.0 - 0.5 * max(0.0, angle - spread - ANGLE_MARGIN) * INV_PI
-        taper = max(0.0, 1.0 - gap * gap * c_fail[1])
-        bounds[f] = ((1.0 + 1e-9) * ratio * factor * (taper * taper)
-                     / (1.0 + c_fail[0] * gap * gap))
-    first = 0
-    for f in range(n_fail):
-        if bounds[f] > bounds[first]:
-            first = f
-    _failure_into(first, count, soa, f_points, f_dirs, f_rots, c_fail, use_orient, p_out,
-                  near2, at_failure)
-    least = _least(p_out, count)
-    # the failures still above it: few are sorted, highest bound first, so that the least
-    # maximum rises as fast as it can and the rest fall below it sooner; many stay in order
-    n_left = 0
-    for f in range(n_fail):
-        bound = bounds[f]
-        if f == first or bound <= least:
-            continue
-        slot = n_left
-        if n_left < SORT_UP_TO:
-            while slot > 0 and bounds[int(order[slot - 1])] < bound:
-                order[slot] = order[slot - 1]
-                slot -= 1
-        order[slot] = f
-        n_left += 1
-    for slot in range(n_left):
-        f = int(order[slot])
-        bound = bounds[f]
-        if bound <= least:
-            if n_left <= SORT_UP_TO:
-                break
-            continue
-        _failure_into(f, count, soa, f_points, f_dirs, f_rots, c_fail, use_orient,
-                      p_out, near2, at_failure)
-        least = _least(p_out, count)
+    return cx, cy, cz, radius, mid, spread
 
 
 #: [rad] added to angles in bounds: above the rounding of arccos near +-1 (~3e-8)
@@ -232,8 +226,6 @@ ANGLE_MARGIN = 1e-6
 ASIN_CUBE = 0.5707963267948967
 #: 1 / pi, rounded up (bounds multiply by it)
 INV_PI = (1.0 + 1e-15) / np.pi
-#: Up to this many failures left after the first are evaluated highest bound first.
-SORT_UP_TO = 24
 
 
 @numba.njit(cache=True, nogil=True)
@@ -241,10 +233,10 @@ def workspace(n_fail):
     """
     Return the scratch rows of :func:`_chunk_probabilities` for a map of n_fail failures.
 
-    Rows 0-11: a chunk's poses, one row per coordinate; rows 12 and 13: the failures'
-    bounds and their order; row 14: one failure's P_COORD at the chunk's points.
+    Rows 0-11: a chunk's poses, one row per coordinate; row 12: the failures' bounds;
+    row 13: one failure's P_COORD at the chunk's points.
     """
-    return np.empty((15, max(CHUNK, n_fail)))
+    return np.empty((14, max(CHUNK, n_fail)))
 
 
 @numba.njit(cache=True, inline='always')
@@ -283,14 +275,14 @@ def _failure_into(f, count, soa, f_points, f_dirs, f_rots, c_fail, use_orient, p
     """
     Raise each point's maximum in p_out to failure f's probability there.
 
-    With orientation, in two passes: P_COORD first (kept in row 14 of the workspace); only
+    With orientation, in two passes: P_COORD first (kept in row 13 of the workspace); only
     if it exceeds some point's maximum is the orientation factor (at most 1) computed, for
     the whole chunk.  Most failures that pass the chunk's bound lose already on P_COORD,
     and the factor is three of the eight square roots and divisions per point.  The
     numbers are those of one pass: the same operations on the same values.
     """
     px, py, pz = soa[0], soa[1], soa[2]
-    coord = soa[14]
+    coord = soa[13]
     fx, fy, fz = f_points[0, f], f_points[1, f], f_points[2, f]
     ux, uy, uz = f_dirs[0, f], f_dirs[1, f], f_dirs[2, f]
     higher = 0
