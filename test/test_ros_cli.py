@@ -72,7 +72,7 @@ def test_service_commands_against_a_running_planner(env, tmp_path):
 
 
 def test_the_demo_waits_for_a_planner_still_coming_up_and_stops_when_it_dies(env, monkeypatch):
-    # a fresh install's planner compiles its kernels for about 40 s before its
+    # a fresh install's planner compiles its kernels for 20-50 s before its
     # service is up: the demo waits for it while it lives, and says why
     from probdis_ros.ros.client import PlannerClient
     from probdis_ros.ros.demo import start_disentangling

@@ -34,7 +34,7 @@ from std_srvs.srv import Trigger
 
 PLANNER = '/probdis_planner'
 #: Why a planner may be slow to offer its services (said by the client and the demo).
-FIRST_START = ("a planner's first start after an install compiles its kernels, about 40 s "
+FIRST_START = ("a planner's first start after an install compiles its kernels, 20-50 s "
                'on two cores; later starts take seconds')
 
 

@@ -88,7 +88,7 @@ def _started(client, wait: float = 5.0) -> bool:
 
 
 #: [s] how long the planner may take to come up: its first start after an install compiles
-#: the planning kernels (about 40 s on two cores; later starts load them in seconds)
+#: the planning kernels (20-50 s on two cores; later starts load them in seconds)
 STARTUP_LIMIT = 600.0
 #: [s] how long a planner that answers but refuses (no joint states yet) is asked again
 REFUSALS_FOR = 60.0

@@ -231,7 +231,7 @@ class PlannerNode(Node):
         # where it would hold the executor for seconds while the retreat must be watched
         # (short plans do: the anytime budget only repeats the same kernels)
         self.get_logger().info('loading the planning kernels (the first start after an install '
-                               'compiles them: about 40 s on two cores)')
+                               'compiles them: 20-50 s on two cores)')
         compiling = time.perf_counter()
         warm_planner = self._make_planner(longest_plan=0.05)
         self._refuse_namesake()           # in this process: the graph is complete at once
