@@ -130,11 +130,11 @@ def _chunk_probabilities(pos, rot, count, f_points, f_dirs, f_rots, c_fail, use_
     n_fail = f_points.shape[1]
     pruned = prune and n_fail >= SKIP_FROM and count >= 2
     first = 0
+    bounds = soa[12]
     if pruned:
         # the chunk's bounding sphere and every failure's bound, in one loop without
         # branches that the compiler vectorises (the failure arrays hold one row per
         # coordinate: EdgeCoster); row 12 of the workspace holds the bounds
-        bounds = soa[12]
         cx, cy, cz, radius, mid, spread = _sphere(soa, count, use_orient, near2)
         m00, m01, m02 = soa[3, mid], soa[4, mid], soa[5, mid]
         m10, m11, m12 = soa[6, mid], soa[7, mid], soa[8, mid]
