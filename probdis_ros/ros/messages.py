@@ -42,7 +42,7 @@ def joint_positions(msg: JointState, joint_names: list[str]) -> np.ndarray:
     return positions_by_name(msg.name, msg.position, joint_names)
 
 
-def stamp_seconds(msg: JointState) -> float:
+def stamp_seconds(msg: JointState | JointTrajectory) -> float:
     """Return a message's header stamp [s] (0 when unstamped)."""
     return msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
 
@@ -146,6 +146,5 @@ def command_from_msg(msg: JointTrajectory, joint_names: list[str], lower: np.nda
         raise ValueError(min(problems)[2])
     times = np.fromiter((to_seconds(point.time_from_start) for point in points), dtype=float,
                         count=m)
-    stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
     return TrajectoryCommand(times, columns['positions'], columns['velocities'],
-                             columns['accelerations'], stamp)
+                             columns['accelerations'], stamp_seconds(msg))
