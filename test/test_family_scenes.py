@@ -155,6 +155,18 @@ def test_an_offline_physics_episode_on_a_family_world_reaches_a_verdict():
     assert len(episode.failures) >= 1 and episode.contact_force.max() > 10.0
 
 
+def test_the_robot_experiment_runs_any_informed_ideas_offline_and_only_bare_ones_on_nodes(
+        probdis, tmp_path):
+    args = ('experiment', 'robot', '--family', 'hook_bar', '--worlds', '1', '--seed', '0',
+            '--methods', 'informed:a', '--json')
+    records = json.loads(probdis(*args, '--offline', '--out', str(tmp_path / 'offline'),
+                                 timeout=300).stdout)
+    assert [(r['method'], r['offline']) for r in records] == [('informed:a', True)]
+    assert records[0]['paths'] >= 1
+    bad = probdis(*args, '--out', str(tmp_path / 'nodes'), check=False)
+    assert bad.returncode == 2 and 'run other ideas with --offline' in bad.stderr
+
+
 def test_the_robot_experiment_runs_family_worlds_offline(probdis, tmp_path):
     out = tmp_path / 'runs'
     records = json.loads(probdis('experiment', 'robot', '--offline', '--family', 'hook_bar',

@@ -151,12 +151,14 @@ def run_robot_experiment(out: Path, scenarios: list[str], methods: list[Method],
     with path.open('a') as stream:
         for number, (scenario, method, run) in enumerate(todo, start=1):
             t0 = time.monotonic()
-            args = (*planner_arguments(method, run, velocity_scaling),
-                    *detection_arguments(detection), '-p', f'bag_dir:={out / "bags"}')
             try:
-                result = (offline_run(scenario, method, run, velocity_scaling, detection)
-                          if offline else run_demo(scenario, timeout, quiet=True,
-                                                   extra_planner_args=args, **world_args))
+                if offline:     # any method: no planner node, whose parameters limit it
+                    result = offline_run(scenario, method, run, velocity_scaling, detection)
+                else:
+                    args = (*planner_arguments(method, run, velocity_scaling),
+                            *detection_arguments(detection), '-p', f'bag_dir:={out / "bags"}')
+                    result = run_demo(scenario, timeout, quiet=True, extra_planner_args=args,
+                                      **world_args)
             except (RuntimeError, TimeoutError) as err:
                 # the nodes did not come up or answer (DDS, a busy machine): the run did not
                 # happen; try it once more, then stop (a rerun resumes here)
