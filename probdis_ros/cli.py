@@ -798,7 +798,7 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_argument('--methods',
                        default='probabilistic,hard:0.01,hard:0.02,epsilon:0.2,epsilon:0.4',
                        help='comma-separated probabilistic[:C_FAIL], hard:Y[:C_HARD], epsilon:X, '
-                       'informed[:IDEAS] (IDEAS: letters of abcdefgh)')
+                       'informed[:IDEAS] (IDEAS: letters of abcdefghi)')
     sweep.add_argument('--worlds', type=int, default=100,
                        help='worlds per obstacle count or family')
     sweep.add_argument('--max-paths', type=int, default=20, help='N_ITER of each episode')
@@ -840,7 +840,7 @@ def build_parser() -> argparse.ArgumentParser:
                        'as the mock can (commands may then be taken late)')
     robot.add_argument('--methods', default='epsilon:0.2,hard:0.01,probabilistic,informed',
                        help='comma-separated probabilistic[:C_FAIL], hard:Y[:C_HARD], epsilon:X, '
-                       'informed[:IDEAS] (IDEAS: letters of abcdefgh)')
+                       'informed[:IDEAS] (IDEAS: letters of abcdefghi)')
     robot.add_argument('--out', default='results/robot', help='directory of robot_runs.jsonl '
                        'and the bags; runs already there are skipped')
     robot.add_argument('--velocity-scaling', type=float, default=0.2,

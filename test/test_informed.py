@@ -23,6 +23,7 @@ from probdis_ros.planning.informed import BUDGET_FACTOR, DEFAULT_IDEAS, Informed
 from probdis_ros.planning.prob_rrt import ProbRRT
 from probdis_ros.planning.probes import (
     even_directions,
+    last_joint_axis,
     probe_chains,
     ProbeRRT,
     ProbeSettings,
@@ -66,7 +67,7 @@ def test_informed_parses_its_ideas(text, ideas, shown):
 
 @pytest.mark.parametrize('text', ['informed:x', 'informed:aa', 'informed:a:3',
                                   'informed:hh', 'informed:g', 'informed:eg',
-                                  'informed:1'])
+                                  'informed:i', 'informed:adi', 'informed:1'])
 def test_informed_refuses_unknown_ideas(text):
     with pytest.raises(ValueError, match='informed'):
         Method.parse(text)
@@ -276,6 +277,34 @@ def test_idea_f_probes_turn_in_place_then_go_straight():
         assert np.all(turn[~standing] >= turn[standing].max() - 0.2)
         turned += turn[-1] > np.pi / 3 and away[-1] > 0.2
     assert turned >= 3
+
+
+def test_idea_i_turns_the_probes_about_the_wrist_each_way_where_f_turns_about_any_axis():
+    arm = arm_for_setting('3d-orient')
+    settings = RRTSettings(iterations=1, n_random=5)
+    start = arm.fk(IIWA_START)
+    axis = last_joint_axis(arm, IIWA_START)
+    np.testing.assert_allclose(axis, arm.tip_frames(IIWA_START)[1][0][:, 2], atol=1e-6)
+
+    def turns_in_place(ideas: str) -> np.ndarray:
+        """Return the unit rotation vectors of the start tree's nodes still at the start."""
+        planner = Method.parse(f'informed:{ideas}').planner(arm, settings)
+        coster = planner.objective.coster(arm, FailureMap(arm.task_space), settings.delta)
+        tree = planner.grow(IIWA_START, -0.5 * IIWA_START, coster, np.random.default_rng(0))[0]
+        rot = arm.tip_frames(tree.nodes[1:tree.size])[1]
+        near = np.linalg.norm(arm.positions(tree.nodes[1:tree.size]) - start.positions[0],
+                              axis=1) < 0.005
+        moved = rot[near] @ arm.tip_frames(IIWA_START)[1][0].T
+        vectors = 0.5 * np.stack([moved[:, 2, 1] - moved[:, 1, 2], moved[:, 0, 2] - moved[:, 2, 0],
+                                  moved[:, 1, 0] - moved[:, 0, 1]], axis=1)
+        turned = np.linalg.norm(vectors, axis=1) > 0.3
+        return vectors[turned] / np.linalg.norm(vectors[turned], axis=1, keepdims=True)
+
+    rolls = turns_in_place('fi') @ axis
+    assert len(rolls) >= 8
+    assert np.all(np.abs(rolls) > 0.99)                 # about the wrist's axis ...
+    assert (rolls > 0).sum() >= 4 and (rolls < 0).sum() >= 4      # ... each way
+    assert np.median(np.abs(turns_in_place('f') @ axis)) < 0.9    # f: about random axes
 
 
 def test_ideas_d_and_f_hang_probes_from_the_start_tree_only():

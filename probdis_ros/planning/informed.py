@@ -34,6 +34,8 @@ set of sweeps); bare ``informed`` is :data:`DEFAULT_IDEAS`:
   lets it through); without orientation, straight probes.
 * ``g`` untried (with d or f): no probe is offered within 30 degrees of the direction of
   a failure it could reach.
+* ``i`` rolling probes (with f): the turning probes turn about the last joint's axis
+  (the wrist's roll), half of them each way, instead of about random axes.
 * ``h`` local failures: each failure's probability tapers to 0 at :data:`LOCAL_REACH` from
   it (the paper's kernel falls as ``1 / (1 + C_FAIL d^2)`` and never ends).  A block tells
   of the surface the object met, not of all the space beyond it; with the paper's kernel
@@ -46,7 +48,7 @@ Bare ``informed`` is ``afh``: on training worlds of the entanglement families (s
 ``closed_box``, ``hook_bar`` and ``clutter`` world in 2.2-3.9 paths on average (the budget
 alone: 0.97 in 7.7, 1.00 in 2.9, 0.83 in 4.0), and local failures then cut the paths of
 ``open_box`` (5.2 to 4.5; 4.6 to 4.4 on seeds 1030-1059) and ``clutter`` (3.9 to 3.2)
-for a little on ``closed_box`` (2.5 to 3.0); b, c, d, e and g did not help there (README,
+for a little on ``closed_box`` (2.5 to 3.0); b, c, d, e, g and i did not help there (README,
 RESULTS "Entanglement families"); they are kept, as switches, for the ablation and for
 whoever takes them further.  ``plate_hole`` stays at 0.33-0.57 (training worlds): a hole
 of 3-6 cm seen from the start covers so little of the sphere of directions that a search
@@ -68,11 +70,11 @@ from probdis_ros.planning.disentangle import Disentangler
 from probdis_ros.planning.prob_rrt import ProbRRT, RRTSettings
 from probdis_ros.planning.probes import ProbeRRT
 
-#: The ideas, by letter (a-e the issue's list; f and g variants of d; h the map's reach).
-IDEAS = 'abcdefgh'
+#: The ideas, by letter (a-e the issue's list; f, g and i variants of d; h the map's reach).
+IDEAS = 'abcdefghi'
 #: The ideas of bare ``informed``: the best on training worlds (seeds 1000-1029, 30 per
-#: family) was the budget with turning probes and local failures; b, c, d, e and g did not
-#: help there.
+#: family) was the budget with turning probes and local failures; b, c, d, e, g and i did
+#: not help there.
 DEFAULT_IDEAS = 'afh'
 #: Idea a: iterations per tree, as a multiple of K (8: 800 for the paper's K = 100).  On the
 #: first 21-22 training worlds of each family (107 in all) 8 solved 90 within 20 paths, 4
@@ -96,6 +98,8 @@ def check_ideas(letters: str) -> str:
                          f'{IDEAS!r}')
     if 'g' in letters and not set(letters) & set('df'):
         raise ValueError(f'informed:{letters}: idea g (untried) needs probes, d or f')
+    if 'i' in letters and 'f' not in letters:
+        raise ValueError(f'informed:{letters}: idea i (rolling) turns the probes of f')
     return ''.join(sorted(letters))
 
 
@@ -109,11 +113,11 @@ def informed_settings(ideas: str, settings: RRTSettings | None) -> RRTSettings:
 
 def informed_planner(ideas: str, arm: Arm, settings: RRTSettings | None, objective
                      ) -> ProbRRT:
-    """Return the planner of a set of ideas (a: budget; d, f, g: probes around the start)."""
+    """Return the planner of a set of ideas (a: budget; d, f, g, i: probes around the start)."""
     settings = informed_settings(ideas, settings)
     if set(ideas) & set('df'):
         return ProbeRRT(arm, settings, objective, straight='d' in ideas, turning='f' in ideas,
-                        untried=UNTRIED if 'g' in ideas else 0.0)
+                        untried=UNTRIED if 'g' in ideas else 0.0, rolling='i' in ideas)
     return ProbRRT(arm, settings, objective)
 
 

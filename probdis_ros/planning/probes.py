@@ -36,6 +36,9 @@ cannot follow within its joint limits.
   then go straight holding that orientation (as far as the joints allow): an obstacle that
   blocks only the object held as before (a gated wall, a soft item, a hook under its bar)
   lets such a probe through;
+* rolling (idea i, with f): the turning probes turn about the last joint's axis, half of
+  them each way, instead of about random axes: the wrist's roll, which the arm can make in
+  place over its whole turn and which spins an object held along the tool;
 * untried (idea g): no probe is offered within ``untried`` of the direction of a failure
   it could reach.
 
@@ -154,6 +157,14 @@ def _dls_steps(arm: Arm, q: np.ndarray, target: np.ndarray, aim: np.ndarray | No
     return q
 
 
+def last_joint_axis(arm: Arm, q: np.ndarray) -> np.ndarray:
+    """Return the unit axis, in the world, about which the last joint turns the tip at q."""
+    shifted = np.array([q, q + JACOBIAN_SHIFT * np.eye(len(q))[-1]])
+    rot = arm.tip_frames(shifted)[1]
+    axis = _vee(rot[1] @ rot[0].T)
+    return axis / np.linalg.norm(axis)
+
+
 def probe_chains(arm: Arm, start: np.ndarray, directions: np.ndarray,
                  settings: ProbeSettings = ProbeSettings(), lower: np.ndarray | None = None,
                  upper: np.ndarray | None = None, axes: np.ndarray | None = None
@@ -221,15 +232,19 @@ def add_chains(tree: Tree, chains: list[np.ndarray], arm: Arm, coster: EdgeCoste
 
 
 class ProbeRRT(ProbRRT):
-    """ProbRRT whose start tree begins with probes around the start (ideas d, f, g)."""
+    """ProbRRT whose start tree begins with probes around the start (ideas d, f, g, i)."""
 
     def __init__(self, arm: Arm, settings=None, objective=None,
                  probes: ProbeSettings | None = None, straight: bool = True,
-                 turning: bool = False, untried: float = 0.0, **kwargs) -> None:
+                 turning: bool = False, untried: float = 0.0, rolling: bool = False,
+                 **kwargs) -> None:
         if not (straight or turning):
             raise ValueError('ProbeRRT needs straight or turning probes')
+        if rolling and not turning:
+            raise ValueError('rolling probes are turning probes: turning must be True')
         self.probes = probes or ProbeSettings()
         self.straight, self.turning, self.untried = straight, turning, float(untried)
+        self.rolling = rolling
         super().__init__(arm, settings, objective, **kwargs)
 
     def _roots(self, start: np.ndarray, goal: np.ndarray, capacity: int,
@@ -247,8 +262,11 @@ class ProbeRRT(ProbRRT):
             chains += probe_chains(self.arm, start, directions[keep], self.probes, self.low,
                                    self.high)
         if turning:
-            axes = rng.normal(size=(len(directions), 3))
+            axes = rng.normal(size=(len(directions), 3))   # drawn alike with i: same streams
             axes /= np.linalg.norm(axes, axis=1, keepdims=True)
+            if self.rolling:
+                signs = np.where(np.arange(len(directions)) % 2 == 0, 1.0, -1.0)
+                axes = signs[:, None] * last_joint_axis(self.arm, start)
             chains += probe_chains(self.arm, start, directions[keep], self.probes, self.low,
                                    self.high, axes[keep])
         trees = super()._roots(start, goal, capacity + sum(len(chain) for chain in chains))
