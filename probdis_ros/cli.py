@@ -28,6 +28,9 @@ import sys
 
 SETTINGS = ('2d', '3d', '3d-orient')
 DEFAULT_C_FAIL = 100.0   # the model's default (probdis_ros.model.failure_map), without its imports
+#: The method strings of the sweep and the robot experiment (IDEAS: planning.informed.IDEAS)
+METHODS_HELP = ('comma-separated probabilistic[:C_FAIL], hard:Y[:C_HARD], epsilon:X, '
+                'informed[:IDEAS] (IDEAS: letters of abcdefghi)')
 
 
 class UsageError(Exception):
@@ -798,8 +801,7 @@ def build_parser() -> argparse.ArgumentParser:
                        'all): world w is the family world of seed SEED + w')
     sweep.add_argument('--methods',
                        default='probabilistic,hard:0.01,hard:0.02,epsilon:0.2,epsilon:0.4',
-                       help='comma-separated probabilistic[:C_FAIL], hard:Y[:C_HARD], epsilon:X, '
-                       'informed[:IDEAS] (IDEAS: letters of abcdefghi)')
+                       help=METHODS_HELP)
     sweep.add_argument('--worlds', type=int, default=100,
                        help='worlds per obstacle count or family')
     sweep.add_argument('--max-paths', type=int, default=20, help='N_ITER of each episode')
@@ -840,8 +842,7 @@ def build_parser() -> argparse.ArgumentParser:
                        help='with --sim-time: speed over the wall clock (at most); 0: as fast '
                        'as the mock can (commands may then be taken late)')
     robot.add_argument('--methods', default='epsilon:0.2,hard:0.01,probabilistic,informed',
-                       help='comma-separated probabilistic[:C_FAIL], hard:Y[:C_HARD], epsilon:X, '
-                       'informed[:IDEAS] (IDEAS: letters of abcdefghi)')
+                       help=METHODS_HELP)
     robot.add_argument('--out', default='results/robot', help='directory of robot_runs.jsonl '
                        'and the bags; runs already there are skipped')
     robot.add_argument('--velocity-scaling', type=float, default=0.2,
