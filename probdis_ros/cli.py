@@ -587,7 +587,8 @@ def cmd_replay(args: argparse.Namespace) -> int:
           f'block(s), {"disentangled" if result.success else "not disentangled"}')
     for block in result.blocks:
         x = ', '.join(f'{v:.3f}' for v in block.x)
-        print(f'  block at {block.t:8.3f} s, flange at ({x}) m, segment {block.segment}')
+        during = 'a retreat' if block.retreat else 'a path'
+        print(f'  block at {block.t:8.3f} s, flange at ({x}) m, during {during}')
     for problem in result.problems[:10]:
         print(f'  note: {problem}')
     if args.save_map:

@@ -208,6 +208,7 @@ def test_replay_of_a_recorded_mock_run_finds_the_live_blocks(tmp_path):
     for (_, failure), block in zip(failures, result.blocks):
         assert abs(failure['t'] - t0 * 1e-9 - block.t) < 0.01     # one control period
         assert np.linalg.norm(np.array(failure['x']) - block.x) < 1e-3
+        assert block.retreat == (failure['segment'] == -1)    # the live run's retreat blocks
 
 
 @pytest.mark.ros

@@ -182,6 +182,9 @@ def test_demo_disentangles_through_two_processes_and_its_bag_replays_the_same(en
     assert (summary['success'], summary['paths'], summary['failures']) == \
         (doc['success'], doc['paths'], doc['failures'])
     assert len(summary['blocks']) == doc['failures']
+    assert summary['blocks'][0]['retreat'] is False          # the first path was blocked
+    text = run(env, 'replay', str(bags[0])).stdout
+    assert text.count(' block at ') == doc['failures'] and 'during a path' in text
 
 
 def test_robot_experiment_runs_through_the_nodes_and_resumes(env, tmp_path):

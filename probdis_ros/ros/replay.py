@@ -65,12 +65,18 @@ class ReplayError(Exception):
 
 @dataclass
 class Block:
-    """A detected block: time since the bag's start [s], configuration, flange, segment."""
+    """
+    A detected block: time since the bag's start [s], configuration, flange, and whether it
+    stopped a retreat (else a path).
+
+    (Which edge of the planned path it began on is the live run's to say: the message holds
+    the timed motion, not the via points it was timed from.)
+    """
 
     t: float
     config: np.ndarray
     x: np.ndarray
-    segment: int
+    retreat: bool = False
 
 
 @dataclass
@@ -91,7 +97,8 @@ class ReplayResult:
     def summary(self) -> dict:
         """Return the JSON summary of ``probdis replay --json``."""
         return {'paths': self.paths,
-                'blocks': [{'t': b.t, 'x': b.x.tolist()} for b in self.blocks],
+                'blocks': [{'t': b.t, 'x': b.x.tolist(), 'retreat': b.retreat}
+                           for b in self.blocks],
                 'failures': len(self.fmap) if self.fmap is not None else 0,
                 'success': self.success}
 
@@ -255,7 +262,7 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
                 continue
             x, v, quat = failure_from_block(arm, config, direction)
             result.fmap.add(x, v, quat)
-            result.blocks.append(Block(t, config.copy(), x, -1 if kind == 'retreat' else 0))
+            result.blocks.append(Block(t, config.copy(), x, retreat=kind == 'retreat'))
             after_block = kind == 'path'
     if status_paths:
         result.paths = sum(status_paths)
