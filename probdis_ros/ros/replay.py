@@ -66,11 +66,11 @@ class ReplayError(Exception):
 @dataclass
 class Block:
     """
-    A detected block: time since the bag's start [s], configuration, flange, and whether it
-    stopped a retreat (else a path).
+    A detected block: time since the bag's start [s], configuration, flange, retreat or not.
 
-    (Which edge of the planned path it began on is the live run's to say: the message holds
-    the timed motion, not the via points it was timed from.)
+    ``retreat``: it stopped a retreat (else a path).  Which edge of the planned path it began
+    on is the live run's to say: the message holds the timed motion, not the via points it
+    was timed from.
     """
 
     t: float
