@@ -22,6 +22,7 @@ from probdis_ros.planning import Disentangler, Method, RRTSettings
 from probdis_ros.planning.informed import BUDGET_FACTOR, DEFAULT_IDEAS, InformedDisentangler
 from probdis_ros.planning.prob_rrt import ProbRRT
 from probdis_ros.planning.probes import (
+    _vee,
     even_directions,
     last_joint_axis,
     probe_chains,
@@ -294,9 +295,7 @@ def test_idea_i_turns_the_probes_about_the_wrist_each_way_where_f_turns_about_an
         rot = arm.tip_frames(tree.nodes[1:tree.size])[1]
         near = np.linalg.norm(arm.positions(tree.nodes[1:tree.size]) - start.positions[0],
                               axis=1) < 0.005
-        moved = rot[near] @ arm.tip_frames(IIWA_START)[1][0].T
-        vectors = 0.5 * np.stack([moved[:, 2, 1] - moved[:, 1, 2], moved[:, 0, 2] - moved[:, 2, 0],
-                                  moved[:, 1, 0] - moved[:, 0, 1]], axis=1)
+        vectors = _vee(rot[near] @ arm.tip_frames(IIWA_START)[1][0].T)
         turned = np.linalg.norm(vectors, axis=1) > 0.3
         return vectors[turned] / np.linalg.norm(vectors[turned], axis=1, keepdims=True)
 
