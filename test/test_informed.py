@@ -74,6 +74,18 @@ def test_informed_refuses_unknown_ideas(text):
         Method.parse(text)
 
 
+def test_the_planner_node_takes_the_planners_ideas_and_the_bare_names_parameters():
+    assert Method.for_node('informed:adfhi').idea_letters == 'adfhi'
+    assert Method.for_node('informed') == Method('informed')
+    assert Method.for_node('hard', threshold=0.02) == Method('hard', 0.02)
+    assert Method.for_node('hard:0.03', threshold=0.02) == Method('hard', 0.03)
+    for bad in ('informed:ab', 'informed:cf', 'informed:e'):
+        with pytest.raises(ValueError, match='map'):
+            Method.for_node(bad)
+    with pytest.raises(ValueError, match='unknown'):
+        Method.for_node('sideways')
+
+
 def test_bare_names_resolve_to_informed_with_its_default_ideas():
     assert Method.resolve('informed') == Method('informed')
     assert Method.from_parameters('informed').idea_letters == DEFAULT_IDEAS

@@ -131,6 +131,40 @@ def test_bad_goals_are_refused(ros, tmp_path):
     del ros_bad, planner_with_goal
 
 
+def test_the_method_parameter_takes_the_planners_informed_ideas_and_refuses_the_maps(
+        ros, tmp_path):
+    from probdis_ros.planning.probes import ProbeRRT
+
+    node = planner(ros, tmp_path, method='informed:adfhi')
+    built = node._make_planner()
+    # the probes of d, f and i on the budget of a: what a run plans with from now on
+    assert isinstance(built, ProbeRRT) and built.settings.iterations == 800
+    assert (built.straight, built.turning, built.rolling) == (True, True, True)
+    for bad, words in (('informed:abf', ('b', 'map')), ('informed:x', ('informed:x',)),
+                       ('sideways', ('sideways',))):
+        result = node.set_parameters([Parameter('method', value=bad)])[0]
+        assert not result.successful and all(w in result.reason for w in words), result.reason
+    assert node.get_parameter('method').value == 'informed:adfhi'
+    assert node.set_parameters([Parameter('method', value='hard')])[0].successful
+    assert type(node._make_planner()) is not ProbeRRT
+
+
+def test_the_robot_experiment_hands_the_node_its_informed_ideas():
+    from probdis_ros.planning import Method
+    from probdis_ros.ros.robot_experiment import planner_arguments
+
+    def params(text):
+        args = planner_arguments(Method.parse(text), 3, 0.2)
+        return dict(arg.split(':=') for arg in args[1::2])
+
+    assert params('informed:adfhi')['method'] == 'informed:adfhi'
+    assert params('informed')['method'] == 'informed'
+    assert params('hard:0.02') == {'method': 'hard', 'threshold': '0.02', 'seed': '3',
+                                   'velocity_scaling': '0.2'}
+    with pytest.raises(ValueError, match='--offline'):
+        params('informed:abf')
+
+
 def test_a_goal_outside_the_limits_from_the_start_is_refused_at_start(ros, tmp_path):
     outside = GOAL.copy()
     outside[0] = 4.0

@@ -17,7 +17,7 @@ Methods: the method string parsed, and its planner built, in one place.
 
 ``probabilistic[:C_FAIL]``, ``hard:Y[:C_HARD]``, ``epsilon:X`` and ``informed[:IDEAS]``
 name a method and its parameter everywhere (the CLI, the sweep, the robot experiment, the
-planner node, which does not run ``informed``).  A :class:`Method` knows the C_FAIL of the
+planner node: :meth:`Method.for_node`).  A :class:`Method` knows the C_FAIL of the
 map its loop learns (``probabilistic:C`` sets it; the others use the default) and builds
 its planner: ProbRRT with an objective, or Epsilon, and its map and loop (the paper's, but
 for ``informed``: :mod:`probdis_ros.planning.informed`, whose ideas are letters, e.g.
@@ -51,6 +51,9 @@ from probdis_ros.planning.objectives import (
 from probdis_ros.planning.prob_rrt import ProbRRT, RRTSettings
 
 METHODS = ('probabilistic', 'hard', 'epsilon', 'informed')
+#: The informed ideas the planner node runs: the planner's own.  b, c and e change what the
+#: map learns, and the node's map file keeps failures only (README "The failure map").
+NODE_IDEAS = 'adfghi'
 _USAGE = 'probabilistic[:C_FAIL], hard:Y[:C_HARD], epsilon:X, informed[:IDEAS]'
 
 
@@ -104,6 +107,23 @@ class Method:
         value = {'probabilistic': c_fail, 'hard': threshold, 'epsilon': epsilon,
                  'informed': None}[name]
         return cls(name, None if value is None else float(value))
+
+    @classmethod
+    def for_node(cls, text: str, threshold: float = DEFAULT_THRESHOLD,
+                 epsilon: float = DEFAULT_EPSILON) -> Method:
+        """
+        Return the method of the planner node's ``method`` parameter; ValueError if it cannot.
+
+        A bare name takes Y and X from the node's ``threshold`` and ``epsilon``; a string
+        with its parameter (``hard:0.02``, ``informed:adfhi``) is parsed as everywhere.
+        """
+        method = cls.resolve(text, threshold, epsilon)
+        foreign = sorted(set(method.idea_letters) - set(NODE_IDEAS))
+        if foreign:
+            raise ValueError(f'{method}: the planner node runs the informed ideas '
+                             f'{NODE_IDEAS!r} only ({", ".join(foreign)} change what the map '
+                             'learns, and its map file keeps failures only)')
+        return method
 
     @classmethod
     def resolve(cls, text: str, threshold: float = DEFAULT_THRESHOLD,

@@ -56,7 +56,7 @@ from probdis_ros.model import FailureMap, FailureMapError, iiwa_arm
 from probdis_ros.model.failure_map import set_aside, write_document
 from probdis_ros.motion.detector import DetectorSettings, MotionWatch
 from probdis_ros.motion.state_check import BadJointStateError, StateCheck, values_by_name
-from probdis_ros.planning import Disentangler, Method, METHODS, RRTSettings, State
+from probdis_ros.planning import Disentangler, Method, RRTSettings, State
 from probdis_ros.planning.prob_rrt import ROBOT_JOINT_MARGIN
 from probdis_ros.planning.warm_up import warm_up
 from probdis_ros.ros.markers import markers_msg
@@ -181,8 +181,9 @@ PARAMETERS = {
                                 0.0, 10.0)),
     'method': ('informed', ParameterDescriptor(
         description='informed (the method of the paper with 8x its iterations, turning '
-                    'probes around the start and failures that reach 0.5 m) | '
-                    'probabilistic (that of the paper) | hard | epsilon')),
+                    'probes around the start and failures that reach 0.5 m; informed:IDEAS '
+                    'with letters of adfghi, e.g. informed:adfhi) | probabilistic (that of '
+                    'the paper) | hard | epsilon (hard:Y, epsilon:X set their parameter)')),
     'threshold': (0.01, _float('Y of the hard method', 0.0, 1.0)),
     'epsilon': (0.2, _float('X of the epsilon method', 0.0, 1.0)),
     'c_fail': (100.0, _float('C_FAIL [1/m^2]', 1e-3, 1e6)),
@@ -376,9 +377,11 @@ class PlannerNode(Node):
                 problem = self._goal_problem(param.value)
                 if problem:
                     return SetParametersResult(successful=False, reason=f'goal {problem}')
-            if param.name == 'method' and param.value not in METHODS:
-                return SetParametersResult(
-                    successful=False, reason=f'method must be one of {", ".join(METHODS)}')
+            if param.name == 'method':
+                try:
+                    Method.for_node(str(param.value))
+                except ValueError as err:
+                    return SetParametersResult(successful=False, reason=f'method: {err}')
             if param.name in ('joint_names', 'joint_states_topic', 'trajectory_topic',
                               'orientation') and hasattr(self, 'arm'):
                 return SetParametersResult(successful=False,
@@ -672,9 +675,9 @@ class PlannerNode(Node):
             p_goal=self.get_parameter('p_goal').value, step=self.get_parameter('step').value,
             plan_time=plan_time,
             joint_margin=self.get_parameter('joint_margin').value)
-        method = Method.from_parameters(self.get_parameter('method').value,
-                                        self.get_parameter('threshold').value,
-                                        self.get_parameter('epsilon').value)
+        method = Method.for_node(self.get_parameter('method').value,
+                                 self.get_parameter('threshold').value,
+                                 self.get_parameter('epsilon').value)
         return method.planner(self.arm, settings, self.get_parameter('length_weight').value)
 
     def _on_stop(self, request, response):

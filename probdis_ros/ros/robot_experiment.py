@@ -40,7 +40,6 @@ import time
 
 import numpy as np
 from probdis_ros.experiments.sweep import Method, read_episodes
-from probdis_ros.planning.informed import DEFAULT_IDEAS
 
 RUNS_FILE = 'robot_runs.jsonl'
 
@@ -78,10 +77,12 @@ def valid(record: dict) -> bool:
 
 def planner_arguments(method: Method, seed: int, velocity_scaling: float) -> list[str]:
     """Return the planner node's ROS arguments that select a method and seed."""
-    if method.name == 'informed' and method.idea_letters != DEFAULT_IDEAS:
-        raise ValueError(f'{method}: the planner node runs bare informed (its map file keeps '
-                         'only failures); run other ideas with --offline')
-    params = {'method': method.name, 'seed': seed, 'velocity_scaling': velocity_scaling}
+    try:
+        Method.for_node(str(method))
+    except ValueError as err:
+        raise ValueError(f'{err}; run these with --offline') from None
+    name = str(method) if method.name == 'informed' else method.name
+    params = {'method': name, 'seed': seed, 'velocity_scaling': velocity_scaling}
     if method.value is not None:
         params[{'probabilistic': 'c_fail', 'hard': 'threshold',
                 'epsilon': 'epsilon'}[method.name]] = method.value
