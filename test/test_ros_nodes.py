@@ -323,12 +323,18 @@ def test_the_planner_keeps_up_with_joint_states_at_1khz(ros, tmp_path):
                  'the first block')
         assert ros.status['state'] not in ('stopped', 'gave_up'), ros.status
         # the block was detected where the flange touches a hidden disc (the map reaches
-        # the disk from the planner's I/O thread, just after the status)
+        # the disk from the planner's I/O thread, just after the status); the next disc is
+        # 0.17 m or more away.  Within 8 cm, not 2: on wall time the detector dates states
+        # by their DDS arrival, and when the two processes starve each other's DDS threads
+        # (a 2-core machine at a third of its usual speed, 2026-12-02) the arrival jitter
+        # reads as a rising gap and the onset is traced 3-6.4 cm back along the motion (6 of
+        # 22 runs; README, "A block is located where it began"); with cores to spare it is
+        # within 2 cm.
         wait_for(lambda: (tmp_path / 'map.json').exists(), 5, 'the map file')
         x = FailureMap.load(tmp_path / 'map.json').points[0]
         gaps = [abs((x - o.center) @ o.normal) + max(0.0, np.linalg.norm(x - o.center) - o.radius)
                 for o in WORLD.obstacles]
-        assert min(gaps) < 0.02
+        assert min(gaps) < 0.08, gaps
         # no growing queue: the newest state stays fresh to the end (a backlog of 1 kHz
         # messages would age steadily); single late samples are the scheduler, not a queue
         late = ages[len(ages) // 2:]
