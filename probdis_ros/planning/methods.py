@@ -117,13 +117,16 @@ class Method:
         A bare name takes Y and X from the node's ``threshold`` and ``epsilon``; a string
         with its parameter (``hard:0.02``, ``informed:adfhi``) is parsed as everywhere.
         """
-        method = cls.resolve(text, threshold, epsilon)
-        foreign = sorted(set(method.idea_letters) - set(NODE_IDEAS))
+        return cls.resolve(text, threshold, epsilon).checked_for_node()
+
+    def checked_for_node(self) -> Method:
+        """Return this method if the planner node can run it; ValueError naming why not."""
+        foreign = sorted(set(self.idea_letters) - set(NODE_IDEAS))
         if foreign:
-            raise ValueError(f'{method}: the planner node runs the informed ideas '
+            raise ValueError(f'{self}: the planner node runs the informed ideas '
                              f'{NODE_IDEAS!r} only ({", ".join(foreign)} change what the map '
                              'learns, and its map file keeps failures only)')
-        return method
+        return self
 
     @classmethod
     def resolve(cls, text: str, threshold: float = DEFAULT_THRESHOLD,

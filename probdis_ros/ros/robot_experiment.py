@@ -78,7 +78,7 @@ def valid(record: dict) -> bool:
 def planner_arguments(method: Method, seed: int, velocity_scaling: float) -> list[str]:
     """Return the planner node's ROS arguments that select a method and seed."""
     try:
-        Method.for_node(str(method))
+        method.checked_for_node()
     except ValueError as err:
         raise ValueError(f'{err}; run these with --offline') from None
     name = str(method) if method.name == 'informed' else method.name
