@@ -315,30 +315,32 @@ def test_the_planner_keeps_up_with_joint_states_at_1khz(ros, tmp_path):
     node = planner(ros, tmp_path, state_timeout=2.0, motion_delay=0.04, velocity_scaling=0.3)
     arm = mock_process(ros, 'rate:=1000.0')
     ages = []
+    # how long ago the newest accepted state arrived (its stamp may be older: a starved
+    # mock runs late; the planner's own backlog is what this test is about)
     ros.probe.create_timer(0.02, lambda: node.measured is not None and ages.append(
-        node._now() - node.measured_at))
+        node._now() - node.state_check.last_time))
     try:
         wait_for(lambda: ros.call('start', timeout=30).success, 30, 'start')
         wait_for(lambda: ros.status.get('failures', 0) >= 1 or finished(ros), 60,
                  'the first block')
         assert ros.status['state'] not in ('stopped', 'gave_up'), ros.status
         # the block was detected where the flange touches a hidden disc (the map reaches
-        # the disk from the planner's I/O thread, just after the status); the next disc is
-        # 0.17 m or more away.  Within 8 cm, not 2: on wall time the detector dates states
-        # by their DDS arrival, and when the two processes starve each other's DDS threads
-        # (a 2-core machine at a third of its usual speed, 2026-12-02) the arrival jitter
-        # reads as a rising gap and the onset is traced 3-6.4 cm back along the motion (6 of
-        # 22 runs; README, "A block is located where it began"); with cores to spare it is
-        # within 2 cm.
+        # the disk from the planner's I/O thread, just after the status); the start is
+        # 0.18 m from every disc.  The states are dated by their stamps: dated by arrival,
+        # a burst held up in a starved mock (it takes a long command message for half a
+        # second on a slow 2-core machine) read as a lagging arm and the block was traced
+        # back to the start
         wait_for(lambda: (tmp_path / 'map.json').exists(), 5, 'the map file')
         x = FailureMap.load(tmp_path / 'map.json').points[0]
         gaps = [abs((x - o.center) @ o.normal) + max(0.0, np.linalg.norm(x - o.center) - o.radius)
                 for o in WORLD.obstacles]
-        assert min(gaps) < 0.08, gaps
+        assert min(gaps) < 0.02, gaps
         # no growing queue: the newest state stays fresh to the end (a backlog of 1 kHz
-        # messages would age steadily); single late samples are the scheduler, not a queue
+        # messages would age steadily, by seconds); single late samples are the scheduler,
+        # not a queue, and a mock sharing the cores with another process publishes only
+        # every 20-30 ms (one state per timer tick, after catching up)
         late = ages[len(ages) // 2:]
-        assert np.median(late) < 0.02 and np.percentile(late, 95) < 0.25, ages
+        assert np.median(late) < 0.05 and np.percentile(late, 95) < 0.25, ages
     finally:
         arm.send_signal(signal.SIGINT)
         arm.wait(10)

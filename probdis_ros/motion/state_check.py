@@ -35,6 +35,13 @@ A joint state is refused, with the reason, when it cannot be the arm's:
 
 After ``SILENCE`` seconds without an accepted state the stream counts as new (a restarted
 driver): stamps and jumps are judged from its first state again.
+
+An accepted state is dated (:meth:`StateCheck.measured_at`) by its stamp moved onto the
+receiver's clock by the stream's quickest delivery, not by when it arrived: arrival jitters
+whenever the receiver's or the sender's threads are starved (a burst of states held up for
+half a second and then delivered at once read as an arm lagging its command by half a
+second), the stamp does not; and the quickest delivery takes out any offset between the
+two clocks.
 """
 
 from __future__ import annotations
@@ -138,6 +145,18 @@ class StateCheck:
         if sequence > 0:
             self.last_sequence = sequence
         return q, values_by_name(names, velocities, self.joint_names)
+
+    def measured_at(self, now: float, stamp: float) -> float:
+        """
+        Return when the state just accepted at now was measured, on the receiver's clock [s].
+
+        Its stamp plus the stream's quickest delivery (never later than now, and later than
+        the state before it, since stamps increase and the quickest only shrinks to a state
+        dated now); unstamped, and on simulated time, the state is dated now.
+        """
+        if stamp > 0 and np.isfinite(self.quickest):
+            return min(now, stamp + self.quickest)
+        return now
 
     def _check_source(self, now: float, stamp: float, sequence: int,
                       clock: float | None) -> None:

@@ -830,16 +830,19 @@ class PlannerNode(Node):
         stamp = stamp_seconds(msg)
         # on simulated time the stamp is the sample's time; the node's clock may already
         # have moved on when a busy executor gets to the message
-        now = stamp if self.use_sim_time and stamp > 0 else self._receive_time(info)
-        self._write_bag(self._record_topics[0][0], round(now * 1e9), data)
+        received = stamp if self.use_sim_time and stamp > 0 else self._receive_time(info)
         try:
             q, v = self.state_check.check(
-                now, msg.name, msg.position, msg.velocity, stamp,
+                received, msg.name, msg.position, msg.velocity, stamp,
                 sequence=info.get('publication_sequence_number') or 0,
                 clock=self._now() if self.use_sim_time and self.sim_clock else None)
         except BadJointStateError as err:
+            self._write_bag(self._record_topics[0][0], round(received * 1e9), data)
             self._refused(str(err))
             return
+        # dated by its stamp on wall time too: arrival jitters when threads starve
+        now = self.state_check.measured_at(received, stamp)
+        self._write_bag(self._record_topics[0][0], round(now * 1e9), data)
         self.measured, self.measured_velocity, self.measured_at = q, v, now
         self.motion_watch.add(now, q)
         if self.run is not None:
