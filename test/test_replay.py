@@ -48,6 +48,7 @@ JS, TRAJ = '/lbr/joint_states', '/lbr/joint_trajectory_controller/joint_trajecto
 STORE = get_typestore(Stores.ROS2_JAZZY)
 JS_TYPE, TRAJ_TYPE = 'sensor_msgs/msg/JointState', 'trajectory_msgs/msg/JointTrajectory'
 RATE = 100.0
+JOINTS = [f'lbr_A{i}' for i in range(1, 8)]
 
 
 def js_message(names, q, stamp):
@@ -146,6 +147,23 @@ def test_replay_finds_the_block_in_both_storage_formats(tmp_path, version, plugi
     assert np.linalg.norm(block.x - iiwa_arm().fk(stop).positions[0]) < 1e-3
     # stalled for stall_time (0.3 s) after the stop, give or take a control period
     assert t_stop + 0.3 - 0.02 <= block.t <= t_stop + 0.3 + 0.02
+
+
+def test_joint_states_held_up_in_delivery_are_dated_by_their_stamps(tmp_path):
+    # a free move recorded by `ros2 bag record` on a busy machine: half a second of joint
+    # states held up and written at once; the live planner dates them by their stamps
+    arm = iiwa_arm()
+    path = np.array([WORLD.start, WORLD.start + np.array([0.8, -0.4, 0.0, 0.6, 0.0, -0.5, 1.2])])
+    timed = time_path(path, arm.velocity_limits, 0.5)
+    messages = [(int(1e9), JS, js_message(JOINTS, path[0], 1.0)),
+                (int(1.05e9), TRAJ, traj_message(timed, JOINTS))]
+    for t in np.arange(0.05, timed.duration + 1.0, 1.0 / RATE):
+        received = max(t, 1.0) if 0.5 <= t < 1.0 else t
+        messages.append((int((1.0 + received) * 1e9) + 500_000 + len(messages), JS,
+                         js_message(JOINTS, timed.at(t - 0.05), 1.0 + t)))
+    write_bag(tmp_path / 'bag', messages, *FORMATS[0])
+    result = replay(tmp_path / 'bag')
+    assert result.paths == 1 and result.blocks == [] and result.success, result.problems
 
 
 def test_a_command_recorded_before_the_first_joint_state_starts_from_the_first_one(tmp_path):

@@ -19,7 +19,10 @@ Any rosbag2 bag (MCAP or sqlite3, metadata v8 or v9, written by probdis or by
 ``ros2 bag record`` on the real arm) with joint states and commanded trajectories: the same
 detector as the live planner (:class:`probdis_ros.motion.detector.BlockDetector`) judges every
 command against the joint states that followed it, and every block becomes a failure, so the
-failure map is rebuilt exactly as the planner built it.  No rclpy: bags are read by
+failure map is rebuilt exactly as the planner built it.  Joint states pass the planner's
+gate (:class:`probdis_ros.motion.state_check.StateCheck`) and are dated as it dates them, by
+their stamps on the recording's clock, so a bag from ``ros2 bag record`` on a busy machine,
+whose states arrived in bursts, is judged as the planner judged it.  No rclpy: bags are read by
 :mod:`probdis_ros.ros.bag_source` (rosbags, and record by record for a damaged MCAP file).
 
 Commands are classified like the planner sends them: a one-point command at the measured
@@ -37,14 +40,14 @@ import numpy as np
 from probdis_ros.model import FailureMap, iiwa_arm
 from probdis_ros.motion.detector import BlockDetector, DetectorSettings, Verdict
 from probdis_ros.motion.jtc import JtcTrajectory
-from probdis_ros.motion.state_check import values_by_name
+from probdis_ros.motion.state_check import StateCheck, values_by_name
 from probdis_ros.planning.disentangle import failure_from_block
 from probdis_ros.ros.bag_source import Bag, BagError
 from probdis_ros.ros.messages import (
     BadJointStateError,
     command_from_msg,
-    joint_positions,
     joint_velocities,
+    stamp_seconds,
 )
 
 JOINT_STATES = '/lbr/joint_states'
@@ -161,6 +164,7 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
          t0: float, overrides: dict) -> None:
     # the detector the live planner ran (its status carries it), unless the caller chose one
     settings = result.settings = given or replace(DetectorSettings(), **overrides)
+    states = StateCheck(names, arm.lower, arm.upper, arm.velocity_limits)
     measured = None
     measured_velocity = None
     early = None               # a command recorded before the first joint state
@@ -215,11 +219,14 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
             detector = BlockDetector(timed, t, settings,
                                      expect_motion=kind == 'path' and not pressed)
             continue
+        # the live planner's gate, and its dating: by stamp on the recording's clock
+        received, stamp = t + t0, stamp_seconds(msg)
         try:
-            q = joint_positions(msg, names)
+            q, _ = states.check(received, msg.name, msg.position, (), stamp)
         except BadJointStateError as err:
             result.problems.append(f'{t:.3f} s: joint state refused: {err}')
             continue
+        t = states.measured_at(received, stamp) - t0
         measured, measured_velocity = q, joint_velocities(msg, names)
         if early is not None:
             sent, command = early
