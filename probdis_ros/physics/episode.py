@@ -33,6 +33,7 @@ import numpy as np
 from probdis_ros.model import iiwa_arm
 from probdis_ros.physics.simulated_robot import build_robot, RobotSettings
 from probdis_ros.planning import Disentangler, Method, RRTSettings, State
+from probdis_ros.planning.disentangle import DEFAULT_MIN_RETREAT
 from probdis_ros.planning.prob_rrt import ROBOT_JOINT_MARGIN
 from probdis_ros.run import Learned, PlanFrom, Run, RunSettings, Send
 
@@ -73,7 +74,7 @@ def run_physics_episode(scene: str, method: str | Method = 'probabilistic', seed
                         run_settings: RunSettings | None = None,
                         robot_settings: RobotSettings | None = None,
                         time_limit: float = 600.0, goal_tolerance: float = 0.04,
-                        min_retreat: float = 0.1) -> PhysicsEpisode:
+                        min_retreat: float = DEFAULT_MIN_RETREAT) -> PhysicsEpisode:
     """Disentangle a physics scene from its start to its goal; reproducible from seed."""
     wall = time.perf_counter()
     method = Method.resolve(method) if isinstance(method, str) else method

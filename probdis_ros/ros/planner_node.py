@@ -57,6 +57,7 @@ from probdis_ros.model.failure_map import set_aside, write_document
 from probdis_ros.motion.detector import DetectorSettings, MotionWatch
 from probdis_ros.motion.state_check import BadJointStateError, StateCheck, values_by_name
 from probdis_ros.planning import Disentangler, Method, RRTSettings, State
+from probdis_ros.planning.disentangle import DEFAULT_MIN_RETREAT
 from probdis_ros.planning.prob_rrt import ROBOT_JOINT_MARGIN
 from probdis_ros.planning.warm_up import warm_up
 from probdis_ros.ros.markers import markers_msg
@@ -176,9 +177,9 @@ PARAMETERS = {
     'state_timeout': (RUN.state_timeout, _float('joint states older than this stop the run '
                                                 '[s]', 0.01, 10.0)),
     'max_paths': (20, _int('N_ITER: paths before giving up', 1, 1000)),
-    'min_retreat': (0.1, _float('a retreat goes back along the way the arm came until this '
-                                'far from the block [rad]; 0: to the last via point only',
-                                0.0, 10.0)),
+    'min_retreat': (DEFAULT_MIN_RETREAT, _float(
+        'a retreat goes back along the way the arm came until this far from the block [rad]; '
+        '0: to the last via point only', 0.0, 10.0)),
     'method': ('informed', ParameterDescriptor(
         description='informed (the method of the paper with 8x its iterations, turning '
                     'probes around the start and failures that reach 0.5 m; informed:IDEAS '
