@@ -30,7 +30,7 @@ SETTINGS = ('2d', '3d', '3d-orient')
 DEFAULT_C_FAIL = 100.0   # the model's default (probdis_ros.model.failure_map), without its imports
 #: The method strings of the sweep and the robot experiment (IDEAS: planning.informed.IDEAS)
 METHODS_HELP = ('comma-separated probabilistic[:C_FAIL], hard:Y[:C_HARD], epsilon:X, '
-                'informed[:IDEAS] (IDEAS: letters of abcdefghi)')
+                'informed[:IDEAS] (IDEAS: letters of abcdefghij)')
 
 
 class UsageError(Exception):

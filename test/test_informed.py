@@ -16,7 +16,7 @@
 
 import numpy as np
 from probdis_ros.model import arm_for_setting, FailureMap, TaskSpace
-from probdis_ros.model.arms import TaskPoints
+from probdis_ros.model.arms import quaternion_to_rotation, rotation_to_quaternion, TaskPoints
 from probdis_ros.model.informed_map import InformedMap, MapIdeas
 from probdis_ros.planning import Disentangler, Method, RRTSettings
 from probdis_ros.planning.informed import BUDGET_FACTOR, DEFAULT_IDEAS, InformedDisentangler
@@ -28,6 +28,7 @@ from probdis_ros.planning.probes import (
     probe_chains,
     ProbeRRT,
     ProbeSettings,
+    rotations,
 )
 import pytest
 
@@ -68,7 +69,8 @@ def test_informed_parses_its_ideas(text, ideas, shown):
 
 @pytest.mark.parametrize('text', ['informed:x', 'informed:aa', 'informed:a:3',
                                   'informed:hh', 'informed:g', 'informed:eg',
-                                  'informed:i', 'informed:adi', 'informed:1'])
+                                  'informed:i', 'informed:adi', 'informed:1',
+                                  'informed:aj', 'informed:adj', 'informed:afj'])
 def test_informed_refuses_unknown_ideas(text):
     with pytest.raises(ValueError, match='informed'):
         Method.parse(text)
@@ -316,6 +318,37 @@ def test_idea_i_turns_the_probes_about_the_wrist_each_way_where_f_turns_about_an
     assert np.all(np.abs(rolls) > 0.99)                 # about the wrist's axis ...
     assert (rolls > 0).sum() >= 4 and (rolls < 0).sum() >= 4      # ... each way
     assert np.median(np.abs(turns_in_place('f') @ axis)) < 0.9    # f: about random axes
+
+
+def test_idea_j_offers_straight_probes_only_once_a_turned_object_was_blocked_nearby():
+    arm = arm_for_setting('3d-orient')
+    settings = RRTSettings(iterations=1, n_random=5)
+    pose = arm.fk(IIWA_START)
+    x0, q0 = pose.positions[0], pose.orientations[0]
+    ahead = np.array([0.0, 0.0, 1.0])
+    turn = rotations(np.array([[1.0, 0.0, 0.0]]), np.deg2rad(45.0))[0]   # 45 degrees
+    turned = rotation_to_quaternion(turn @ quaternion_to_rotation(q0)[0])[0]
+    assert np.isclose(2 * np.arccos(min(1.0, abs(turned @ q0))), np.deg2rad(45.0))
+
+    def start_tree(ideas: str, *failures) -> np.ndarray:
+        fmap = FailureMap(arm.task_space)
+        for x, q in failures:
+            fmap.add(x, ahead, q)
+        planner = Method.parse(f'informed:{ideas}').planner(arm, settings)
+        coster = planner.objective.coster(arm, fmap, settings.delta)
+        tree = planner.grow(IIWA_START, -0.5 * IIWA_START, coster, np.random.default_rng(0))[0]
+        return tree.nodes[:tree.size]
+
+    near_held, near_turned = (x0 + 0.1 * ahead, q0), (x0 + 0.1 * ahead, turned)
+    far_turned = (x0 + 0.6 * ahead, turned)             # beyond the probes' reach
+    # the same draws either way: without the straight probes, the tree of f and i alone
+    for failures in ((), (near_held,), (far_turned,)):
+        np.testing.assert_array_equal(start_tree('adfij', *failures),
+                                      start_tree('afi', *failures))
+    # a turned object blocked within reach: the straight probes too, as d, f and i offer them
+    np.testing.assert_array_equal(start_tree('adfij', near_turned, far_turned),
+                                  start_tree('adfi', near_turned, far_turned))
+    assert len(start_tree('adfi', near_turned)) > len(start_tree('afi', near_turned))
 
 
 def test_ideas_d_and_f_hang_probes_from_the_start_tree_only():

@@ -36,6 +36,10 @@ set of sweeps); bare ``informed`` is :data:`DEFAULT_IDEAS`:
   a failure it could reach.
 * ``i`` rolling probes (with f): the turning probes turn about the last joint's axis
   (the wrist's roll), half of them each way, instead of about random axes.
+* ``j`` held after a turn (with d and f): the straight probes are offered only once a
+  failure within their reach was met with the object turned by more than
+  :data:`HELD_AFTER_TURN` from how it is held at the plan's start: a turn is tried first,
+  and holding the object as it is once a turn has been seen not to free it.
 * ``h`` local failures: each failure's probability tapers to 0 at :data:`LOCAL_REACH` from
   it (the paper's kernel falls as ``1 / (1 + C_FAIL d^2)`` and never ends).  A block tells
   of the surface the object met, not of all the space beyond it; with the paper's kernel
@@ -70,8 +74,8 @@ from probdis_ros.planning.disentangle import Disentangler
 from probdis_ros.planning.prob_rrt import ProbRRT, RRTSettings
 from probdis_ros.planning.probes import ProbeRRT
 
-#: The ideas, by letter (a-e the issue's list; f, g and i variants of d; h the map's reach).
-IDEAS = 'abcdefghi'
+#: The ideas, by letter (a-e the issue's list; f, g, i and j variants of d; h the map's reach).
+IDEAS = 'abcdefghij'
 #: The ideas of bare ``informed``: the best on training worlds (seeds 1000-1029, 30 per
 #: family) was the budget with turning probes and local failures; b, c, d, e, g and i did
 #: not help there.
@@ -82,6 +86,10 @@ DEFAULT_IDEAS = 'afh'
 BUDGET_FACTOR = 8
 #: Idea g: [rad] no probe is offered this near the direction of a failure within its reach.
 UNTRIED = math.radians(30)
+#: Idea j: [rad] a failure met with the object turned by more than this from how it is held
+#: at the plan's start makes the straight probes worth offering (first choice, not tuned:
+#: the shipped Maze's first block came with the knob turned 51 degrees, RESULTS.md).
+HELD_AFTER_TURN = math.radians(30)
 #: Idea h: [m] a failure's probability tapers to 0 this far from it.  Chosen among 0.15,
 #: 0.25, 0.35 and 0.5 on training worlds: 0.25 took the fewest paths on ``open_box`` (4.1)
 #: but cost ``closed_box`` 1.8 paths; 0.5 gave the fewest paths summed over the families.
@@ -100,6 +108,9 @@ def check_ideas(letters: str) -> str:
         raise ValueError(f'informed:{letters}: idea g (untried) needs probes, d or f')
     if 'i' in letters and 'f' not in letters:
         raise ValueError(f'informed:{letters}: idea i (rolling) turns the probes of f')
+    if 'j' in letters and not set('df') <= set(letters):
+        raise ValueError(f'informed:{letters}: idea j (held after a turn) chooses between '
+                         f'the probes of d and f')
     return ''.join(sorted(letters))
 
 
@@ -113,11 +124,12 @@ def informed_settings(ideas: str, settings: RRTSettings | None) -> RRTSettings:
 
 def informed_planner(ideas: str, arm: Arm, settings: RRTSettings | None, objective
                      ) -> ProbRRT:
-    """Return the planner of a set of ideas (a: budget; d, f, g, i: probes around the start)."""
+    """Return the planner of a set of ideas (a: budget; d, f, g, i, j: probes around the start)."""
     settings = informed_settings(ideas, settings)
     if set(ideas) & set('df'):
         return ProbeRRT(arm, settings, objective, straight='d' in ideas, turning='f' in ideas,
-                        untried=UNTRIED if 'g' in ideas else 0.0, rolling='i' in ideas)
+                        untried=UNTRIED if 'g' in ideas else 0.0, rolling='i' in ideas,
+                        held_after_turn=HELD_AFTER_TURN if 'j' in ideas else 0.0)
     return ProbRRT(arm, settings, objective)
 
 

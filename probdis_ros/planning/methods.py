@@ -53,7 +53,7 @@ from probdis_ros.planning.prob_rrt import ProbRRT, RRTSettings
 METHODS = ('probabilistic', 'hard', 'epsilon', 'informed')
 #: The informed ideas the planner node runs: the planner's own.  b, c and e change what the
 #: map learns, and the node's map file keeps failures only (README "The failure map").
-NODE_IDEAS = 'adfghi'
+NODE_IDEAS = 'adfghij'
 _USAGE = 'probabilistic[:C_FAIL], hard:Y[:C_HARD], epsilon:X, informed[:IDEAS]'
 
 

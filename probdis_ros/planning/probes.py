@@ -13,7 +13,7 @@
 # limitations under the License.
 
 """
-Ideas d, f and g of the informed method: probes around the start, offered to the start tree.
+Ideas d, f, g, i and j of the informed method: probes around the start, for the start tree.
 
 A random tree leaves the start along joint-space edges of up to a radian, whose end-effector
 traces are long arcs: seen from the start, its ways out of a trap point wherever the arm's
@@ -41,6 +41,12 @@ cannot follow within its joint limits.
   place over its whole turn and which spins an object held along the tool;
 * untried (idea g): no probe is offered within ``untried`` of the direction of a failure
   it could reach.
+* held after a turn (idea j, with d and f): the straight probes are offered only once a
+  failure within the probes' reach was met with the object turned by more than
+  ``held_after_turn`` from how it is held at the plan's start.  Until then a turn is the
+  first hypothesis (a gate, a hook, a soft item: straight probes would spend a path on
+  every gate of a closed box); a block met turned says a turn does not free it there (a
+  knob in a slot), so holding it as it is becomes worth a path.
 
 Draws: the lattice's turn, then (turning probes) the axes, both before the tree's own draws
 and from the same stream; the paper's ProbRRT is not touched (this class overrides only
@@ -232,19 +238,23 @@ def add_chains(tree: Tree, chains: list[np.ndarray], arm: Arm, coster: EdgeCoste
 
 
 class ProbeRRT(ProbRRT):
-    """ProbRRT whose start tree begins with probes around the start (ideas d, f, g, i)."""
+    """ProbRRT whose start tree begins with probes around the start (ideas d, f, g, i, j)."""
 
     def __init__(self, arm: Arm, settings=None, objective=None,
                  probes: ProbeSettings | None = None, straight: bool = True,
                  turning: bool = False, untried: float = 0.0, rolling: bool = False,
-                 **kwargs) -> None:
+                 held_after_turn: float = 0.0, **kwargs) -> None:
         if not (straight or turning):
             raise ValueError('ProbeRRT needs straight or turning probes')
         if rolling and not turning:
             raise ValueError('rolling probes are turning probes: turning must be True')
+        if held_after_turn > 0 and not (straight and turning):
+            raise ValueError('held_after_turn chooses between straight and turning probes: '
+                             'both must be on')
         self.probes = probes or ProbeSettings()
         self.straight, self.turning, self.untried = straight, turning, float(untried)
         self.rolling = rolling
+        self.held_after_turn = float(held_after_turn)
         super().__init__(arm, settings, objective, **kwargs)
 
     def _roots(self, start: np.ndarray, goal: np.ndarray, capacity: int,
@@ -258,7 +268,10 @@ class ProbeRRT(ProbRRT):
         keep = self._untried(directions, self.arm.positions(start)[0], coster.fmap)
         chains = []
         turning = self.turning and self.arm.task_space.has_orientation
-        if self.straight or not turning:        # without orientation a turn is no turn
+        straight = self.straight
+        if straight and turning and self.held_after_turn > 0:
+            straight = self.turned_block_near(start, coster.fmap)
+        if straight or not turning:        # without orientation a turn is no turn
             chains += probe_chains(self.arm, start, directions[keep], self.probes, self.low,
                                    self.high)
         if turning:
@@ -272,6 +285,23 @@ class ProbeRRT(ProbRRT):
         trees = super()._roots(start, goal, capacity + sum(len(chain) for chain in chains))
         add_chains(trees[0], chains, self.arm, coster)
         return trees
+
+    def turned_block_near(self, start: np.ndarray, fmap) -> bool:
+        """
+        Tell whether a failure within the probes' reach of start was met turned (idea j).
+
+        Turned: its orientation differs from the object's at start by more than
+        ``held_after_turn`` [rad], the angle of the rotation between the two.
+        """
+        if not len(fmap.points):
+            return False
+        pose = self.arm.fk(start[None])
+        near = np.linalg.norm(fmap.points - pose.positions[0], axis=1) <= self.probes.length
+        if not near.any():
+            return False
+        dots = np.abs(fmap.orientations[near] @ pose.orientations[0])
+        angles = 2.0 * np.arccos(np.clip(dots, 0.0, 1.0))
+        return bool((angles > self.held_after_turn).any())
 
     def _untried(self, directions: np.ndarray, x0: np.ndarray, fmap) -> np.ndarray:
         """

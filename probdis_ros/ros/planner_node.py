@@ -183,7 +183,7 @@ PARAMETERS = {
     'method': ('informed', ParameterDescriptor(
         description='informed (the method of the paper with 8x its iterations, turning '
                     'probes around the start and failures that reach 0.5 m; informed:IDEAS '
-                    'with letters of adfghi, e.g. informed:adfhi) | probabilistic (that of '
+                    'with letters of adfghij, e.g. informed:adfhi) | probabilistic (that of '
                     'the paper) | hard | epsilon (hard:Y, epsilon:X set their parameter)')),
     'threshold': (0.01, _float('Y of the hard method', 0.0, 1.0)),
     'epsilon': (0.2, _float('X of the epsilon method', 0.0, 1.0)),
