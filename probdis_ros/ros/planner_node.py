@@ -181,9 +181,10 @@ PARAMETERS = {
         'a retreat goes back along the way the arm came until this far from the block [rad]; '
         '0: to the last via point only', 0.0, 10.0)),
     'method': ('informed', ParameterDescriptor(
-        description='informed (the method of the paper with 8x its iterations, turning '
-                    'probes around the start and failures that reach 0.5 m; informed:IDEAS '
-                    'with letters of adfghij, e.g. informed:adfhi) | probabilistic (that of '
+        description='informed (the method of the paper with 8x its iterations, probes '
+                    'around the start, turning and, once a turned object was blocked, '
+                    'straight, and failures that reach 0.5 m; informed:IDEAS with letters '
+                    'of adfghij, e.g. informed:afh) | probabilistic (that of '
                     'the paper) | hard | epsilon (hard:Y, epsilon:X set their parameter)')),
     'threshold': (0.01, _float('Y of the hard method', 0.0, 1.0)),
     'epsilon': (0.2, _float('X of the epsilon method', 0.0, 1.0)),
