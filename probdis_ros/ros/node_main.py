@@ -18,6 +18,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 import gc
+import signal
 import sys
 
 import rclpy
@@ -45,8 +46,23 @@ def parameter_error(err: ParameterException) -> str:
     return str(err)
 
 
+def _no_interrupt(signum: int, frame: object) -> None:
+    """Take SIGINT without a KeyboardInterrupt: rclpy's handler ends the spin."""
+
+
 def run_node(name: str, factory: Callable[[], Node], args: list[str] | None = None) -> int:
-    """Create the node, spin it, and always destroy it (which closes its files)."""
+    """
+    Create the node, spin it, and always destroy it (which closes its files).
+
+    SIGINT ends it as SIGTERM does: rclpy's handler shuts the context down and the spin
+    returns between callbacks.  Python's own handler, which rclpy's calls after it, would
+    raise KeyboardInterrupt wherever the main thread is, and once inside the recorder it
+    left half a record in the bag (``test_the_bag_is_readable_after_the_node_is_killed``).
+    """
+    try:
+        signal.signal(signal.SIGINT, _no_interrupt)     # before rclpy.init, which chains it
+    except ValueError:
+        pass                 # not the main thread: no handler of ours to replace
     try:
         rclpy.init(args=args)
     except RCLError as err:            # unparsable --ros-args
