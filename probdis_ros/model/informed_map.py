@@ -79,7 +79,7 @@ def _plane_basis(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return e1, np.cross(v, e1)
 
 
-def _turn(q: np.ndarray, qs: np.ndarray) -> np.ndarray:
+def turn_angles(q: np.ndarray, qs: np.ndarray) -> np.ndarray:
     """Return the rotation angles [rad] between unit quaternion q and each of qs."""
     return 2.0 * np.arccos(np.clip(np.abs(qs @ q), 0.0, 1.0))
 
@@ -195,7 +195,7 @@ class InformedMap(FailureMap):
         hit = (np.einsum('nd,nd->n', ahead, ahead) < self.ideas.free_radius ** 2) & \
             (ahead @ v > 0.0)
         if self.task_space.has_orientation and np.any(hit):
-            hit &= _turn(q, orientations) <= self.ideas.free_turn
+            hit &= turn_angles(q, orientations) <= self.ideas.free_turn
         return bool(np.any(hit))
 
     def observe_free(self, positions: np.ndarray, orientations: np.ndarray | None) -> None:

@@ -61,6 +61,7 @@ import math
 import numpy as np
 from probdis_ros.model.arms import Arm, quaternion_to_rotation
 from probdis_ros.model.edge_costs import EdgeCoster
+from probdis_ros.model.informed_map import turn_angles
 from probdis_ros.planning.prob_rrt import ProbRRT
 from probdis_ros.planning.tree import Tree
 
@@ -299,8 +300,7 @@ class ProbeRRT(ProbRRT):
         near = np.linalg.norm(fmap.points - pose.positions[0], axis=1) <= self.probes.length
         if not near.any():
             return False
-        dots = np.abs(fmap.orientations[near] @ pose.orientations[0])
-        angles = 2.0 * np.arccos(np.clip(dots, 0.0, 1.0))
+        angles = turn_angles(pose.orientations[0], fmap.orientations[near])
         return bool((angles > self.held_after_turn).any())
 
     def _untried(self, directions: np.ndarray, x0: np.ndarray, fmap) -> np.ndarray:
