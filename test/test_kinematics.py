@@ -182,6 +182,33 @@ def test_positions_alone_are_the_chain_kernels_positions(setting):
     assert position_joints(codes, tip_offset) == 6     # the flange joint turns in place
 
 
+def test_the_fast_sines_and_cosines_are_libms_within_two_ulp():
+    """The samples' kinematics may use them: off by rounding, never by a wrong quadrant."""
+    from probdis_ros.model.fast_math import sincos_into
+
+    x = np.concatenate([np.random.default_rng(7).uniform(-7.0, 7.0, 200_000),
+                        np.arange(-8, 9) * (np.pi / 4), [0.0, -0.0, 1e-300, 3.05, -3.05]])
+    sines, cosines = np.empty_like(x), np.empty_like(x)
+    sincos_into(x, sines, cosines)
+    for fast, exact in ((sines, np.sin(x)), (cosines, np.cos(x))):
+        error = np.abs(fast - exact)
+        assert error.max() <= 2.3e-16 * 4           # absolute, also where the value is ~0
+        big = np.abs(exact) > 1e-3
+        assert (error[big] <= 2 * np.spacing(np.abs(exact[big]))).all()
+
+
+@pytest.mark.parametrize('setting', ['2d', '3d', '3d-orient'])
+def test_sample_positions_are_the_positions_to_rounding(setting):
+    """The planner's samples are posed fast, within 1e-15 m, and only the rows asked."""
+    arm = arm_for_setting(setting)
+    configs = random_configs(arm, 5_000, seed=8)
+    rows = np.arange(len(configs)) % 4 != 1
+    fast = arm.sample_positions(configs, rows)
+    exact = arm.positions(configs)
+    np.testing.assert_allclose(fast[rows], exact[rows], rtol=0, atol=1e-15)
+    assert not fast[~rows].any()
+
+
 def test_planar_positions_of_some_rows():
     arm = PlanarArm()
     configs = random_configs(arm, 50, seed=6)

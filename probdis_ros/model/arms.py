@@ -42,6 +42,7 @@ from probdis_ros.model.kinematics import (
     PLANAR,
     positions_kernel,
     quaternion_kernel,
+    sample_positions_kernel,
 )
 
 
@@ -110,6 +111,15 @@ class Arm(ABC):
         if rows.any():
             out[rows] = self.fk(batch[rows]).positions
         return out
+
+    def sample_positions(self, configs: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        """
+        Return :meth:`positions` of the rows in ``rows``, where the last bits do not matter.
+
+        The planner's random samples (only the one farthest from a tree is kept); an arm
+        may compute them faster, to within rounding.
+        """
+        return self.positions(configs, rows)
 
     def as_batch(self, configs: np.ndarray) -> np.ndarray:
         """Return configs as a float ``(N, n_joints)`` array, or raise ValueError."""
@@ -321,6 +331,23 @@ class SerialChainArm(Arm):
         mask = np.ones(len(batch), dtype=np.bool_) if rows is None else \
             np.ascontiguousarray(rows, dtype=np.bool_)
         positions_kernel(batch, mask, *self.kernel_params(), out)
+        return out
+
+    def sample_positions(self, configs: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        """
+        Return :meth:`positions` of the rows in ``rows``, within a few 1e-16 m, fast.
+
+        An AXIS_CHAIN (the iiwa) poses them with vectorised sines and cosines
+        (:func:`sample_positions_kernel`, about ten times faster: a fifth of a plan's time
+        on a 19-failure map went to the 18,000 samples' positions); others as positions.
+        """
+        kind, codes, offsets, _, tip_offset, _ = self.kernel_params()
+        if kind != AXIS_CHAIN:
+            return self.positions(configs, rows)
+        batch = np.ascontiguousarray(self.as_batch(configs))
+        out = np.zeros((len(batch), 3))
+        sample_positions_kernel(batch, np.ascontiguousarray(rows, dtype=np.bool_), codes,
+                                offsets, tip_offset, out)
         return out
 
     def fk(self, configs: np.ndarray) -> TaskPoints:

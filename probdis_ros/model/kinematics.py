@@ -28,6 +28,7 @@ tip_rotation``, :meth:`probdis_ros.model.arms.Arm.kernel_params`):
 
 import numba
 import numpy as np
+from probdis_ros.model.fast_math import sincos_into
 
 PLANAR = 0
 CHAIN = 1
@@ -257,6 +258,69 @@ def positions_kernel(q, rows, kind, codes, offsets, bases, tip_offset, tip_rotat
         else:
             chain_pose(cs, sn, offsets, bases, tip_offset, tip_rotation, pos, rot, 0)
             pos_out[k] = pos[0]
+
+
+#: Rows posed together by :func:`sample_positions_kernel` (its scratch stays in L1/L2).
+SAMPLE_BLOCK = 256
+
+
+@numba.njit(cache=True, nogil=True, error_model='numpy')
+def sample_positions_kernel(q, rows, codes, offsets, tip_offset, pos_out):
+    """
+    Write the tip positions of an AXIS_CHAIN's rows of q where ``rows`` is True, fast.
+
+    Within a few 1e-16 m of :func:`positions_kernel` (the sines and cosines are
+    :func:`probdis_ros.model.fast_math.sincos_into`'s), about ten times faster: blocks of
+    rows are turned a joint at a time, one coordinate per row of scratch, in loops the
+    compiler vectorises.  For the planner's random samples, whose positions only pick the
+    one farthest from a tree (a tie within 1e-16 m is all they could change).
+    """
+    n_used = position_joints(codes, tip_offset)
+    block = SAMPLE_BLOCK
+    angles = np.empty(block)
+    sines = np.empty((n_used, block))
+    cosines = np.empty((n_used, block))
+    rot = np.empty((9, block))         # row-major R, one coordinate per row
+    pos = np.empty((3, block))
+    for b0 in range(0, q.shape[0], block):
+        count = min(block, q.shape[0] - b0)
+        for j in range(n_used):
+            for i in range(count):
+                angles[i] = q[b0 + i, j]
+            sincos_into(angles[:count], sines[j, :count], cosines[j, :count])
+        for i in range(count):
+            for e in range(9):
+                rot[e, i] = 1.0 if e % 4 == 0 else 0.0
+            pos[0, i] = pos[1, i] = pos[2, i] = 0.0
+        for j in range(offsets.shape[0]):
+            ox, oy, oz = offsets[j, 0], offsets[j, 1], offsets[j, 2]
+            for r in range(3):
+                for i in range(count):
+                    pos[r, i] += (rot[3 * r, i] * ox + rot[3 * r + 1, i] * oy
+                                  + rot[3 * r + 2, i] * oz)
+            if j >= n_used:
+                continue
+            # R <- R R_axis mixes two columns (a, b): a' = a c + b s, b' = b c - a s, with s
+            # negated for a negative code and for y (whose column order is z, x)
+            axis = abs(codes[j])
+            a, b = (0, 1) if axis == 3.0 else (0, 2) if axis == 2.0 else (1, 2)
+            sign = (1.0 if codes[j] > 0 else -1.0) * (-1.0 if axis == 2.0 else 1.0)
+            for r in range(3):
+                col_a = rot[3 * r + a]
+                col_b = rot[3 * r + b]
+                for i in range(count):
+                    c = cosines[j, i]
+                    s = sign * sines[j, i]
+                    x = col_a[i]
+                    y = col_b[i]
+                    col_a[i] = x * c + y * s
+                    col_b[i] = y * c - x * s
+        ox, oy, oz = tip_offset[0], tip_offset[1], tip_offset[2]
+        for i in range(count):
+            if rows[b0 + i]:
+                for r in range(3):
+                    pos_out[b0 + i, r] = (pos[r, i] + rot[3 * r, i] * ox
+                                          + rot[3 * r + 1, i] * oy + rot[3 * r + 2, i] * oz)
 
 
 @numba.njit(cache=True, inline='always')

@@ -259,7 +259,8 @@ class ProbRRT:
         to_goal = rng.random(iterations) < s.p_goal
         samples = self.arm.random_configurations(rng, iterations * s.n_random, s.joint_margin)
         # only the samples of iterations that do not aim at the other root are looked at
-        return to_goal, samples, self.arm.positions(samples, np.repeat(~to_goal, s.n_random))
+        return to_goal, samples, self.arm.sample_positions(samples,
+                                                           np.repeat(~to_goal, s.n_random))
 
     def _grow_round(self, tree: Tree, other_root: np.ndarray, coster: EdgeCoster,
                     rng: np.random.Generator, iterations: int) -> None:
