@@ -14,6 +14,8 @@
 
 """Forward kinematics: compiled chain against pinocchio and yourdfpy, planar arm by hand."""
 
+from pathlib import Path
+
 import numpy as np
 import pinocchio as pin
 from probdis_ros.model import arm_for_setting, iiwa_arm, PlanarArm
@@ -216,3 +218,35 @@ def test_planar_positions_of_some_rows():
     some = arm.positions(configs, rows)
     np.testing.assert_array_equal(some[rows], arm.fk(configs[rows]).positions)
     assert not some[~rows].any()
+
+
+def test_a_change_to_any_kernel_file_drops_every_cached_kernel(tmp_path):
+    """Numba alone would keep a caller's machine code when only its callee's file changed."""
+    import shutil
+
+    from probdis_ros.model import kernel_cache
+
+    sources = tmp_path / 'src'
+    sources.mkdir()
+    for name in kernel_cache.KERNEL_FILES:
+        shutil.copy(Path(kernel_cache.__file__).parent / name, sources / name)
+    before = kernel_cache.kernel_digest(sources)
+    with open(sources / 'edge_kernels.py', 'a') as f:
+        f.write('# changed\n')
+    after = kernel_cache.kernel_digest(sources)
+    assert after != before
+
+    cache = tmp_path / 'cache'
+    cache.mkdir()
+    names = ['tree_kernels.grow_kernel-175.py311.nbi', 'tree_kernels.grow_kernel-175.py311.1.nbc',
+             'fast_math.sincos-60.py311.nbi', 'other.kernel-1.py311.nbi', 'tree_kernels.pyc']
+    for name in names:
+        (cache / name).write_text('x')
+    assert kernel_cache.drop_stale_kernels(cache, before)         # no stamp yet: dropped
+    assert sorted(p.name for p in cache.iterdir()) == [
+        'other.kernel-1.py311.nbi', kernel_cache.STAMP, 'tree_kernels.pyc']
+    (cache / names[0]).write_text('x')
+    assert not kernel_cache.drop_stale_kernels(cache, before)     # same sources: kept
+    assert (cache / names[0]).exists()
+    assert kernel_cache.drop_stale_kernels(cache, after)          # edge_kernels.py changed
+    assert not (cache / names[0]).exists()

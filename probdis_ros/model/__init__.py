@@ -20,6 +20,9 @@ from functools import cache
 
 from probdis_ros.model.arms import Arm, PlanarArm, SerialChainArm, TaskPoints, TaskSpace
 from probdis_ros.model.failure_map import FailureMap, FailureMapError
+from probdis_ros.model.kernel_cache import check_kernel_cache
+
+check_kernel_cache()        # before any kernel is loaded from the cache
 
 #: The paper's three simulated settings and the arm and task space each uses.
 SETTINGS = ('2d', '3d', '3d-orient')
