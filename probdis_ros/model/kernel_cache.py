@@ -27,6 +27,7 @@ clone starts with no cache and is not affected.
 from __future__ import annotations
 
 import hashlib
+import os
 from pathlib import Path
 
 #: The files of the model package that hold compiled kernels (they call one another).
@@ -66,7 +67,9 @@ def drop_stale_kernels(cache_dir: Path, digest: str) -> bool:
                     path.unlink(missing_ok=True)
                     dropped = True
         cache_dir.mkdir(parents=True, exist_ok=True)
-        stamp.write_text(digest)
+        fresh = stamp.with_name(f'{STAMP}.{os.getpid()}')    # whole or not at all
+        fresh.write_text(digest)
+        os.replace(fresh, stamp)
     except OSError:
         return False
     return dropped
