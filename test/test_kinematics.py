@@ -250,3 +250,12 @@ def test_a_change_to_any_kernel_file_drops_every_cached_kernel(tmp_path):
     assert (cache / names[0]).exists()
     assert kernel_cache.drop_stale_kernels(cache, after)          # edge_kernels.py changed
     assert not (cache / names[0]).exists()
+
+
+def test_every_file_with_compiled_kernels_is_in_the_caches_digest():
+    from probdis_ros.model import kernel_cache
+
+    package = Path(kernel_cache.__file__).parents[1]
+    compiled = {path.relative_to(package).as_posix() for path in package.rglob('*.py')
+                if 'numba.njit' in path.read_text()}
+    assert compiled == {f'model/{name}' for name in kernel_cache.KERNEL_FILES}
