@@ -503,7 +503,8 @@ def cheapest_edge_kernel(sources, target, base, toward, delta, length_weight, ri
         n = max(1, int(np.ceil(length / delta - 1e-12)))
         steps[i] = n
         weight[i] = risk_weight * (length / n) / delta
-        _edge_rotations(a, b, n, kind, cs[i], sn[i], cd[i], sd[i])
+        if cap < np.inf:        # the start's probability needs them now; else when first picked
+            _edge_rotations(a, b, n, kind, cs[i], sn[i], cd[i], sd[i])
         for j in range(n_joints):
             ends[i, j] = b[j]
     pos = np.empty((CHUNK, 3))
@@ -532,6 +533,10 @@ def cheapest_edge_kernel(sources, target, base, toward, delta, length_weight, ri
         if done[pick]:
             return pick, bound[pick]
         i = pick
+        if k_done[i] == 0 and cap == np.inf:
+            # an edge's cosines and sines once it is advanced at all (many never are)
+            _edge_rotations(sources[i] if toward else target, ends[i], steps[i], kind, cs[i],
+                            sn[i], cd[i], sd[i])
         count = min(CHUNK, steps[i] - k_done[i])
         _chunk_poses(cs[i], sn[i], cd[i], sd[i], ends[i], k_done[i], count, steps[i], kind,
                      joint_params, offsets, bases, tip_offset, tip_rotation, pos, rot)
