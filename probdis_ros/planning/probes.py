@@ -297,11 +297,18 @@ class ProbeRRT(ProbRRT):
         if not len(fmap.points):
             return False
         pose = self.arm.fk(start[None])
-        near = np.linalg.norm(fmap.points - pose.positions[0], axis=1) <= self.probes.length
+        _, distance = self._offsets(pose.positions[0], fmap)
+        near = distance <= self.probes.length
         if not near.any():
             return False
         angles = turn_angles(pose.orientations[0], fmap.orientations[near])
         return bool((angles > self.held_after_turn).any())
+
+    @staticmethod
+    def _offsets(x0: np.ndarray, fmap) -> tuple[np.ndarray, np.ndarray]:
+        """Return each failure point's offset from x0 and its length (the probes' reach)."""
+        ahead = fmap.points - x0
+        return ahead, np.linalg.norm(ahead, axis=1)
 
     def _untried(self, directions: np.ndarray, x0: np.ndarray, fmap) -> np.ndarray:
         """
@@ -313,10 +320,10 @@ class ProbeRRT(ProbRRT):
         keep = np.ones(len(directions), dtype=bool)
         if self.untried <= 0 or not len(fmap.points):
             return keep
-        ahead = fmap.points - x0
-        reach = np.linalg.norm(ahead, axis=1)
-        near = (reach > 1e-9) & (reach <= self.probes.length)
+        ahead, distance = self._offsets(x0, fmap)
+        # (a failure at x0 itself has no direction)
+        near = (distance > 1e-9) & (distance <= self.probes.length)
         if near.any():
-            seen = ahead[near] / reach[near, None]
+            seen = ahead[near] / distance[near, None]
             keep = np.max(directions @ seen.T, axis=1) < math.cos(self.untried)
         return keep
