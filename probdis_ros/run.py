@@ -71,7 +71,7 @@ from probdis_ros.motion.profiles import (
     MotionLimits,
     stop,
 )
-from probdis_ros.motion.state_check import LIMIT_TOLERANCE
+from probdis_ros.motion.state_check import JUMP_SPEED, LIMIT_TOLERANCE
 from probdis_ros.planning.disentangle import Disentangler, State
 
 #: What a run says when the joint states echo the command (README "Pointing it at the real arm").
@@ -204,7 +204,18 @@ def rest_command(arm: Arm, limits: MotionLimits, q: np.ndarray,
     """Return the command that decelerates the arm to rest from (q, v), inside the limits."""
     q = np.clip(np.asarray(q, dtype=float), arm.lower, arm.upper)
     v = np.zeros_like(q) if v is None else np.asarray(v, dtype=float)
-    return stop(q, v, np.zeros_like(q), limits).command
+    return stop(q, possible(arm, v), np.zeros_like(q), limits).command
+
+
+def possible(arm: Arm, v: np.ndarray) -> np.ndarray:
+    """
+    Return v within what the arm can do (JUMP_SPEED x its velocity limits; finite).
+
+    The joint states' check refuses faster ones; this keeps every stop built from a
+    velocity inside the arm's range even if one got past it (a stop from 1e12 rad/s failed).
+    """
+    top = JUMP_SPEED * arm.velocity_limits
+    return np.clip(np.nan_to_num(np.asarray(v, dtype=float)), -top, top)
 
 
 @dataclass
@@ -571,8 +582,11 @@ class Run:
         else:
             return
         q = np.clip(q, self.arm.lower, self.arm.upper)
-        v = v if v is not None and np.all(np.isfinite(v)) else 0 * q
-        command = stop(q, v, a, self.limits).command
+        v = possible(self.arm, v) if v is not None else 0 * q
+        try:
+            command = stop(q, v, a, self.limits).command
+        except (RuntimeError, ValueError):      # never left without a command to stop
+            command = stop(q, 0 * q, 0 * q, self.limits).command   # hold where it is
         self._emit(Send(command, None, now))
         # what the arm runs from now on: a later stop without fresh states starts from it
         self.trajectory = JtcTrajectory(command, q, v, now)

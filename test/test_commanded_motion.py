@@ -338,3 +338,21 @@ def test_an_arm_that_has_just_come_to_rest_does_not_move():
     for t in np.arange(0.0, 0.5, 0.001):
         watch.add(t, Q0 + np.array([0.5, 0, 0, 0, 0, 0, 0]) * min(t, 0.3))
     assert watch.moving(0.5, 0.005) == 0.0
+
+
+@pytest.mark.parametrize('speed', [3.0, 1e12, np.inf])
+def test_a_stop_from_an_impossible_measured_velocity_stays_within_the_arms_range(speed):
+    # the joint states' check refuses such states; should one reach the run, its stop must
+    # neither run the arm at that speed nor fail (a stop from 1e12 rad/s raised in ruckig)
+    run = run_from()
+    velocity = np.zeros(7)
+    velocity[0] = speed
+    run.on_joint_state(0.01, Q0, velocity)
+    run.actions.clear()
+    run.stop()
+    sends = [a for a in run.actions if isinstance(a, Send)]
+    assert sends, 'no stop was sent'
+    command = sends[-1].command
+    assert np.all(np.isfinite(command.positions)) and ARM.within_limits(command.positions).all()
+    assert np.abs(command.velocities).max() <= 1.5 * ARM.velocity_limits.max()
+    assert np.allclose(command.velocities[-1], 0.0)

@@ -168,3 +168,16 @@ def test_corrupt_entries_never_give_a_half_loaded_map(tmp_path):
             FailureMap.load(path)
     with pytest.raises(FailureMapError, match='cannot read'):
         FailureMap.load(tmp_path / 'missing.json')
+
+
+def test_a_failure_is_added_whole_beside_a_reader_of_the_arrays():
+    # the planner node learns a blocked retreat while a plan runs in another thread: the plan's
+    # coster reads the three arrays, which must belong to the same failures (the compiled
+    # kernels read the directions by the points' count, unchecked)
+    fmap = FailureMap(TaskSpace.POSE3)
+    fmap.add([0.5, 0.0, 0.3], [1.0, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0])
+    seen = fmap.arrays()
+    fmap.add([0.6, 0.1, 0.3], [0.0, 1.0, 0.0], [0.0, 1.0, 0.0, 0.0])
+    assert [len(a) for a in seen] == [1, 1, 1]          # a snapshot stays whole
+    assert [len(a) for a in fmap.arrays()] == [2, 2, 2]
+    assert np.array_equal(fmap.points, fmap.arrays()[0]) and len(fmap) == 2

@@ -36,7 +36,7 @@ import pytest
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
-from rclpy.qos import qos_profile_sensor_data
+from rclpy.qos import DurabilityPolicy, qos_profile_sensor_data, QoSProfile
 from ros_harness import JOINTS, RosTest, wait_for
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
@@ -114,6 +114,12 @@ def stop_ends_at_rest_near(ros, q, count=0):
     assert np.allclose(last.points[-1].velocities, 0.0)
 
 
+def with_velocity(msg: JointState, joint: int, value: float) -> JointState:
+    """Return msg with every joint at rest but one at value [rad/s]."""
+    msg.velocity = [value if j == joint else 0.0 for j in range(len(msg.name))]
+    return msg
+
+
 def outside(joint=0, value=3.0):
     q = START.copy()
     q[joint] = value
@@ -131,6 +137,7 @@ def outside(joint=0, value=3.0):
     ('repeated_stamp', 'repeats the stamp'),
     ('unstamped', 'unstamped after stamped'),
     ('old_configuration', 'jumped'),
+    ('glitched_velocity', 'velocity 20 rad/s is beyond 1.5 x its limit'),
 ])
 def test_a_joint_state_the_arm_cannot_have_stops_the_run_and_refuses_start(
         ros, tmp_path, fault, reason):
@@ -150,6 +157,7 @@ def test_a_joint_state_the_arm_cannot_have_stops_the_run_and_refuses_start(
         'repeated_stamp': lambda: stream.message(stamp=Time(sec=sec, nanosec=nanosec)),
         'unstamped': lambda: Stream(ros, rate=1e-3, stamped=False).message(),
         'old_configuration': lambda: stream.message(outside(0, START[0] + 0.3)),
+        'glitched_velocity': lambda: with_velocity(stream.message(), 0, 20.0),
     }[fault]()
     ros.js_pub.publish(bad)
     wait_for(lambda: finished(ros), 5, 'the run to stop')
@@ -212,6 +220,23 @@ def test_stop_without_a_run_decelerates_from_the_measured_velocity(ros, tmp_path
     assert np.abs(velocities[0] - velocity).max() < 0.15 and np.allclose(velocities[-1], 0.0)
     assert np.abs(np.diff(velocities, axis=0)).max() <= 10.0 * 0.01 * 1.01
     assert ARM.within_limits(positions).all()
+
+
+def test_stop_after_a_run_commands_nothing_from_stale_joint_states(ros, tmp_path):
+    # the ended run's stop was built from its last (old) state: JTC would pull an arm moved
+    # since then back there within a period
+    planner(ros, tmp_path)
+    stream = Stream(ros)
+    wait_for(lambda: ros.call('start').success, 10, 'start')
+    assert ros.call('stop').success
+    wait_for(lambda: ros.status.get('state') == 'stopped', 5, 'the stop')
+    stream.cancel()
+    time.sleep(2.5)                       # state_timeout 2 s
+    count = len(ros.trajectories)
+    response = ros.call('stop')
+    assert response.success and 'no fresh joint state: nothing commanded' in response.message
+    time.sleep(0.3)
+    assert len(ros.trajectories) == count
 
 
 # ------------------------------------------------------------------ file faults, item 4
@@ -361,6 +386,7 @@ def planner_process(ros, tmp_path, *params, stderr=None):
     ('goal:=[1, 2, 3]', 'goal'),
     ('velocity_scaling:=0.0', 'velocity_scaling'),
     ('max_paths:=0', 'max_paths'),
+    ('d_dist:=0.35', 'd_dist'),           # in its own range, but not below gap_ceiling
 ])
 def test_startup_parameters_out_of_range_give_one_line_naming_the_parameter(
         ros, tmp_path, param, name):
@@ -375,6 +401,16 @@ def test_startup_parameters_out_of_range_give_one_line_naming_the_parameter(
     assert len(lines) == 1 and name in lines[0] and 'Traceback' not in err, err
 
 
+def test_parameters_that_do_not_go_together_are_refused_when_set(ros, tmp_path):
+    # checked only at ~/start before, where the error escaped the service and killed the node
+    node = planner(ros, tmp_path)
+    for name, value in (('d_dist', 0.35), ('load_com', [0.0, 0.1])):
+        result = node.set_parameters([Parameter(name, value=value)])[0]
+        assert not result.successful and name in result.reason, result.reason
+    Stream(ros)
+    wait_for(lambda: ros.call('start').success, 10, 'start with the parameters kept')
+
+
 def test_sigint_ends_a_planner_in_the_middle_of_a_long_plan(ros, tmp_path):
     Stream(ros)
     process = planner_process(ros, tmp_path, 'plan_time:=30.0')
@@ -386,6 +422,42 @@ def test_sigint_ends_a_planner_in_the_middle_of_a_long_plan(ros, tmp_path):
     finally:
         if process.poll() is None:
             process.kill()
+
+
+@pytest.mark.parametrize('signum', [signal.SIGINT, signal.SIGTERM])
+def test_a_planner_killed_mid_motion_stops_the_arm_before_it_goes(ros, tmp_path, signum):
+    # rclpy's own handler shut the context down first: nothing could be published, and JTC
+    # ran the rest of the path unsupervised (1.65 rad further on the kinematic mock)
+    mock(ros, free_scenario(tmp_path))
+    process = planner_process(ros, tmp_path, 'velocity_scaling:=0.3')
+    try:
+        wait_for(lambda: ros.call('start', timeout=60).success, 90, 'start')
+        wait_for(lambda: ros.status.get('state') == 'executing', 30, 'motion')
+        time.sleep(0.3)
+        count = len(ros.trajectories)
+        process.send_signal(signum)
+        assert process.wait(15) == 0
+    finally:
+        if process.poll() is None:
+            process.kill()
+    assert len(ros.trajectories) > count, 'no stop was sent'
+    stop = ros.trajectories[-1][1]
+    velocities = np.array([p.velocities for p in stop.points])
+    assert len(stop.points) > 1 and np.abs(velocities[0]).max() > 0.01, 'a deceleration'
+    assert np.allclose(velocities[-1], 0.0)
+    assert ros.status['state'] == 'stopped' and 'shutting down' in ros.status['message']
+
+
+def test_a_stray_message_on_the_instance_topic_is_ignored(ros, tmp_path):
+    # one message that is not JSON made the node exit (code 2) with the arm moving
+    planner(ros, tmp_path)
+    Stream(ros)
+    latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    stray = ros.probe.create_publisher(String, '/probdis_planner/instance', latched)
+    for text in ('hello', '[1, 2]'):
+        stray.publish(String(data=text))
+        time.sleep(0.3)
+    wait_for(lambda: ros.call('start').success, 10, 'start after the stray messages')
 
 
 # ------------------------------------------------------------------ item 2

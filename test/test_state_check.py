@@ -92,3 +92,39 @@ def test_noise_of_0_005_rad_at_1_khz_is_never_refused():
         q = Q + np.sin(t) * 0.2 + rng.normal(0.0, 0.005, 7)
         check.check(t, NAMES, q, stamp=100.0 + t)
     assert check.refused == 0
+
+
+@pytest.mark.parametrize('velocities, reason', [
+    ([3.0, *np.zeros(6)], 'A1 velocity 3 rad/s is beyond 1.5 x its limit'),
+    ([0.0, 0.0, 0.0, -1e12, 0.0, 0.0, 0.0], 'A4 velocity -1e+12 rad/s'),
+    (np.zeros(5), '7 names but 5 velocities'),
+])
+def test_a_velocity_the_arm_cannot_have_is_refused(velocities, reason):
+    # every stop and every path starts from the measured velocity: a glitch there would be
+    # commanded (a stop from 3 rad/s ran A1 at 3 rad/s, from 1e12 raised inside the stop)
+    check = gate()
+    with pytest.raises(BadJointStateError, match=re.escape(reason)):
+        check.check(1.0, NAMES, Q, velocities)
+    assert check.refused == 1
+
+
+def test_velocities_within_the_limits_or_none_are_taken():
+    check = gate()
+    fast = 1.4 * ARM.velocity_limits * np.where(np.arange(7) % 2, 1.0, -1.0)
+    _, v = check.check(1.0, NAMES, Q, fast)
+    assert np.array_equal(v, fast)
+    _, v = check.check(1.01, NAMES, Q, [])
+    assert v is None
+
+
+def test_a_state_stamped_ahead_of_its_stream_is_refused():
+    # it would date the stream ahead and let the jump check take any step over the
+    # stamps' gap: a configuration 3 s ahead, 5 rad away, was taken, and the arm's own
+    # states then refused as older
+    check = StateCheck(NAMES, ARM.lower, ARM.upper, ARM.velocity_limits, late=0.1)
+    for k in range(10):
+        check.check(1.0 + 0.01 * k, NAMES, Q, stamp=50.0 + 0.01 * k)
+    far = Q + 0.7
+    with pytest.raises(BadJointStateError, match='ahead of its stream'):
+        check.check(1.1, NAMES, far, stamp=53.1)
+    check.check(1.11, NAMES, Q, stamp=50.11)      # the arm's own stream goes on

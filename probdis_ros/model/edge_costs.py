@@ -77,10 +77,11 @@ class EdgeCoster:
         # points and directions padded to 3-D (z = 0 in 2-D); one row per coordinate
         # (C-contiguous whatever the map's size: one numba type, so the kernels compile
         # once, and the kernels' bounds of all failures vectorise)
-        rotations = quaternion_to_rotation(fmap.orientations).reshape(-1, 3, 3)
+        points, directions, orientations = fmap.arrays()    # the same failures, whole
+        rotations = quaternion_to_rotation(orientations).reshape(-1, 3, 3)
         self._failures = (
-            np.ascontiguousarray(_padded(fmap.points, dim).T),
-            np.ascontiguousarray(_padded(fmap.directions, dim).T),
+            np.ascontiguousarray(_padded(points, dim).T),
+            np.ascontiguousarray(_padded(directions, dim).T),
             np.ascontiguousarray(rotations.transpose(1, 2, 0)),
             (self.c_fail, 1.0 / self.terms.reach ** 2), bool(arm.task_space.has_orientation),
             bool(prune))

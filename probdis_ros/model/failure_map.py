@@ -109,12 +109,47 @@ class FailureMap:
         self.task_space = TaskSpace(task_space)
         self.c_fail = float(c_fail)
         dim = self.task_space.dim
-        self.points = np.empty((0, dim))
-        self.directions = np.empty((0, dim))
-        self.orientations = np.empty((0, 4))
+        self._arrays = (np.empty((0, dim)), np.empty((0, dim)), np.empty((0, 4)))
 
     def __len__(self) -> int:
         return len(self.points)
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """
+        Return (points, directions, orientations) as one set of the same failures.
+
+        Read them so where another thread may add a failure meanwhile (the planner node
+        learns a blocked retreat while a plan runs): the three attributes read one after
+        another could be of different lengths, and the compiled kernels do not check.
+        """
+        return self._arrays
+
+    @property
+    def points(self) -> np.ndarray:
+        """Return the failure points ``(F, dim)``."""
+        return self._arrays[0]
+
+    @points.setter
+    def points(self, value: np.ndarray) -> None:
+        self._arrays = (value, *self._arrays[1:])
+
+    @property
+    def directions(self) -> np.ndarray:
+        """Return the unit directions of the blocked motions ``(F, dim)``."""
+        return self._arrays[1]
+
+    @directions.setter
+    def directions(self, value: np.ndarray) -> None:
+        self._arrays = (self._arrays[0], value, self._arrays[2])
+
+    @property
+    def orientations(self) -> np.ndarray:
+        """Return the unit quaternions ``(F, 4)`` (w, x, y, z) held at the failures."""
+        return self._arrays[2]
+
+    @orientations.setter
+    def orientations(self, value: np.ndarray) -> None:
+        self._arrays = (*self._arrays[:2], value)
 
     def add(self, x: np.ndarray, v: np.ndarray, q: np.ndarray | None = None) -> None:
         """Record a blocked movement at x, moving along v, with orientation q."""
@@ -137,9 +172,10 @@ class FailureMap:
             q = unit(q, norm)
         else:
             q = np.array([1.0, 0.0, 0.0, 0.0])
-        self.points = np.vstack([self.points, x])
-        self.directions = np.vstack([self.directions, unit(v, speed)])
-        self.orientations = np.vstack([self.orientations, q])
+        points, directions, orientations = self._arrays
+        # one assignment: a reader in another thread sees the failure whole or not at all
+        self._arrays = (np.vstack([points, x]), np.vstack([directions, unit(v, speed)]),
+                        np.vstack([orientations, q]))
 
     def clear(self) -> None:
         """Forget every failure."""

@@ -18,6 +18,8 @@ Joint states checked against the arm before anything is built from them (no rclp
 A joint state is refused, with the reason, when it cannot be the arm's:
 
 * its shape: a missing joint, a name given twice, arrays of the wrong length, a NaN or inf;
+* a velocity the arm cannot have: above ``JUMP_SPEED`` x its URDF limit (a glitch; every stop
+  and every path would start from it);
 * a position outside the joint limits by more than ``LIMIT_TOLERANCE`` (within it, the
   position is clamped to the limit: nothing outside the limits is ever built from a state);
 * time going backwards: a header stamp not later than the last accepted one (a stream that
@@ -31,7 +33,8 @@ A joint state is refused, with the reason, when it cannot be the arm's:
 * staleness (with ``late`` set): a state that arrives more than ``late`` seconds later after
   its stamp than the stream's quickest (a backlog delivered late: the arm was there then,
   not now), or, on simulated time (``clock`` given), stamped more than ``late`` from the
-  clock (not on the simulated time at all).
+  clock (not on the simulated time at all); and one stamped more than ``late`` ahead of the
+  stream's time (it would date the stream ahead, and open the jump check to any step).
 
 After ``SILENCE`` seconds without an accepted state the stream counts as new (a restarted
 driver): stamps and jumps are judged from its first state again.
@@ -133,6 +136,7 @@ class StateCheck:
         """
         try:
             q = self._check(now, names, positions, stamp)
+            v = self._velocities(names, velocities)
             self._check_source(now, stamp, sequence, clock)
         except BadJointStateError as err:
             self.refuse(now, str(err))
@@ -144,7 +148,23 @@ class StateCheck:
                 self.quickest = min(self.quickest, now - stamp)
         if sequence > 0:
             self.last_sequence = sequence
-        return q, values_by_name(names, velocities, self.joint_names)
+        return q, v
+
+    def _velocities(self, names: Sequence[str], velocities: Sequence[float]
+                    ) -> np.ndarray | None:
+        """Return the state's velocities (None if it has none); refuse impossible ones."""
+        if len(velocities) and len(velocities) != len(names):
+            raise BadJointStateError(f'{len(names)} names but {len(velocities)} velocities')
+        v = values_by_name(names, velocities, self.joint_names)
+        if v is None:
+            return None
+        excess = np.abs(v) - JUMP_SPEED * self.velocity_limits
+        if excess.max() > 0:
+            j = int(excess.argmax())
+            raise BadJointStateError(
+                f'A{j + 1} velocity {v[j]:.4g} rad/s is beyond {JUMP_SPEED:g} x its limit '
+                f'{self.velocity_limits[j]:.3f}: a glitch in the driver?')
+        return v
 
     def measured_at(self, now: float, stamp: float) -> float:
         """
@@ -176,6 +196,10 @@ class StateCheck:
             raise BadJointStateError(
                 f'arrived {now - stamp - self.quickest:.3f} s later after its stamp than the '
                 f'quickest of its stream: stale (a backlog delivered late)')
+        elif np.isfinite(self.quickest) and self.quickest - (now - stamp) > self.late:
+            raise BadJointStateError(
+                f'stamped {self.quickest - (now - stamp):.3f} s ahead of its stream\'s time: '
+                f'a second publisher, or a clock that jumped?')
 
     def refuse(self, now: float, reason: str) -> None:
         """Note a state refused at now (also one refused before it got here: undecodable)."""

@@ -98,6 +98,8 @@ class Tracking:
     final_gap: float         # L1 gap when the detector said done [rad]
     verdict: str
     settle_s: float          # from the planned end to the verdict [s]
+    jtc_error: float = 0.0   # largest |JTC's desired - measured| of a joint [rad]: what
+    #                          JTC's path tolerance (constraints.<joint>.trajectory) checks
 
 
 def free_tracking(velocity_scaling: float, scene: str = 'demo_hook',
@@ -109,12 +111,17 @@ def free_tracking(velocity_scaling: float, scene: str = 'demo_hook',
     goal = robot.engine.scene.goal
     motion = _motion(np.array([start, goal]), velocity_scaling)
     t_start = robot.time
-    gaps = []
+    gaps, errors = [], []
+
+    def look(detector: BlockDetector) -> None:
+        gaps.append(detector.gap)
+        running = robot.controller.trajectory
+        desired = running.at(robot.time - running.taken_at)
+        errors.append(float(np.abs(desired - robot.engine.q).max()))
     detector, verdict = _drive(robot, motion.command, _detection(), motion.duration + 5.0,
-                               lambda d: gaps.append(d.gap))
-    peak = max(gaps, default=0.0)
-    return Tracking(velocity_scaling, peak, detector.gap, verdict.value,
-                    robot.time - t_start - motion.duration)
+                               look)
+    return Tracking(velocity_scaling, max(gaps, default=0.0), detector.gap, verdict.value,
+                    robot.time - t_start - motion.duration, max(errors, default=0.0))
 
 
 @dataclass

@@ -294,20 +294,21 @@ class ProbeRRT(ProbRRT):
         Turned: its orientation differs from the object's at start by more than
         ``held_after_turn`` [rad], the angle of the rotation between the two.
         """
-        if not len(fmap.points):
+        points, _, orientations = fmap.arrays()
+        if not len(points):
             return False
         pose = self.arm.fk(start[None])
-        _, distance = self._offsets(pose.positions[0], fmap)
+        _, distance = self._offsets(pose.positions[0], points)
         near = distance <= self.probes.length
         if not near.any():
             return False
-        angles = turn_angles(pose.orientations[0], fmap.orientations[near])
+        angles = turn_angles(pose.orientations[0], orientations[near])
         return bool((angles > self.held_after_turn).any())
 
     @staticmethod
-    def _offsets(x0: np.ndarray, fmap) -> tuple[np.ndarray, np.ndarray]:
+    def _offsets(x0: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Return each failure point's offset from x0 and its length (the probes' reach)."""
-        ahead = fmap.points - x0
+        ahead = points - x0
         return ahead, np.linalg.norm(ahead, axis=1)
 
     def _untried(self, directions: np.ndarray, x0: np.ndarray, fmap) -> np.ndarray:
@@ -318,9 +319,10 @@ class ProbeRRT(ProbRRT):
         every failure within the probes' reach.
         """
         keep = np.ones(len(directions), dtype=bool)
-        if self.untried <= 0 or not len(fmap.points):
+        points = fmap.arrays()[0]
+        if self.untried <= 0 or not len(points):
             return keep
-        ahead, distance = self._offsets(x0, fmap)
+        ahead, distance = self._offsets(x0, points)
         # (a failure at x0 itself has no direction)
         near = (distance > 1e-9) & (distance <= self.probes.length)
         if near.any():

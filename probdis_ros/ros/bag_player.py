@@ -21,6 +21,11 @@ planner, RViz or a second recorder can be driven from a recording.  Publishers a
 and transient-local with a history of 100: that offer matches every subscriber, whatever
 reliability and durability it asks for (the status topic is latched, joint states are not).
 Topics whose type is not installed here are skipped with a note, like ``ros2 bag play`` does.
+
+Commands to the arm (``trajectory_msgs/msg/JointTrajectory``) are left out unless asked for
+(``commands``): every probdis bag holds them, and on the robot's computer
+joint_trajectory_controller would execute them, moving the arm from wherever it is with no
+one watching.
 """
 
 from __future__ import annotations
@@ -42,6 +47,8 @@ QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
 #: the subscriber has matched the publisher, and messages sent in between arrive later, repaired
 #: in a burst out of their timing (seen: the first 0.3 s of a replay squeezed together)
 MATCH_SETTLE = 0.5
+#: The type of the commands to the arm, published only on request.
+COMMAND_TYPE = 'trajectory_msgs/msg/JointTrajectory'
 
 
 @dataclass
@@ -61,9 +68,12 @@ def message_class(msgtype: str) -> type:
     return getattr(importlib.import_module(f'{package}.{kind}'), name)
 
 
-def play(path: str, rate: float = 1.0, wait: float = 2.0, progress: bool = True) -> PlayResult:
+def play(path: str, rate: float = 1.0, wait: float = 2.0, progress: bool = True,
+         commands: bool = False) -> PlayResult:
     """
     Publish every message of the bag at ``path`` with its recorded timing scaled by ``rate``.
+
+    Commands to the arm only with ``commands`` (never where a controller runs).
 
     Waits up to ``wait`` seconds for every topic to have a subscriber before the first
     message, then ``MATCH_SETTLE`` (so that a listener started just before gets the
@@ -79,6 +89,11 @@ def play(path: str, rate: float = 1.0, wait: float = 2.0, progress: bool = True)
         with Bag(path) as bag:
             publishers = {}
             for topic, msgtype in sorted(bag.topics.items()):
+                if msgtype == COMMAND_TYPE and not commands:
+                    result.skipped[topic] = ('commands to the arm: a controller would execute '
+                                             'them (--commands publishes them, never with a '
+                                             'controller running)')
+                    continue
                 try:
                     publishers[topic] = node.create_publisher(message_class(msgtype), topic, QOS)
                 except (ImportError, AttributeError, ValueError) as err:

@@ -20,6 +20,7 @@ from collections.abc import Callable
 import gc
 import signal
 import sys
+import threading
 
 import rclpy
 from rclpy._rclpy_pybind11 import RCLError
@@ -28,8 +29,12 @@ from rclpy.exceptions import (
     InvalidParameterValueException,
     ParameterException,
 )
-from rclpy.executors import ExternalShutdownException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
+
+#: [s] the longest the spin waits before it looks whether a signal asked it to end.
+SIGNAL_CHECK = 0.05
 
 
 def parameter_error(err: ParameterException) -> str:
@@ -46,29 +51,36 @@ def parameter_error(err: ParameterException) -> str:
     return str(err)
 
 
-def _no_interrupt(signum: int, frame: object) -> None:
-    """Take SIGINT without a KeyboardInterrupt: rclpy's handler ends the spin."""
-
-
 def run_node(name: str, factory: Callable[[], Node], args: list[str] | None = None) -> int:
     """
-    Create the node, spin it, and always destroy it (which closes its files).
+    Create the node, spin it, and always halt and destroy it (which closes its files).
 
-    SIGINT ends it as SIGTERM does: rclpy's handler shuts the context down and the spin
-    returns between callbacks.  Python's own handler, which rclpy's calls after it, would
-    raise KeyboardInterrupt wherever the main thread is, and once inside the recorder it
-    left half a record in the bag (``test_the_bag_is_readable_after_the_node_is_killed``).
+    SIGINT and SIGTERM only ask the spin to end, between callbacks (a KeyboardInterrupt
+    raised wherever the main thread was once left half a record in the bag,
+    ``test_the_bag_is_readable_after_the_node_is_killed``); the context stays up until the
+    node's ``halt(reason)``, if it has one, has run: the planner commands a decelerating
+    stop there, which a context already shut down by rclpy's own handler could not publish
+    (the arm ran the rest of its path unsupervised).  An error out of a callback halts it
+    too before the node goes.
     """
+    ending = threading.Event()
+    options = None
+
+    def end(signum: int, frame: object) -> None:
+        ending.set()
     try:
-        signal.signal(signal.SIGINT, _no_interrupt)     # before rclpy.init, which chains it
+        for signum in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(signum, end)
+        options = SignalHandlerOptions.NO       # ours, not rclpy's
     except ValueError:
-        pass                 # not the main thread: no handler of ours to replace
+        pass                 # not the main thread: rclpy's handlers, as a host expects
     try:
-        rclpy.init(args=args)
+        rclpy.init(args=args, signal_handler_options=options)
     except RCLError as err:            # unparsable --ros-args
         print(f'{name}: error: {str(err).splitlines()[0]}', file=sys.stderr)
         return 2
     node = None
+    reason = 'SIGINT or SIGTERM'
     try:
         node = factory()
         # what start-up built (modules, compiled kernels, the node) lives as long as the
@@ -77,24 +89,45 @@ def run_node(name: str, factory: Callable[[], Node], args: list[str] | None = No
         # when the message of a long path was built: the arm's states waited behind it)
         gc.collect()
         gc.freeze()
-        rclpy.spin(node)
+        executor = SingleThreadedExecutor(context=node.context)
+        executor.add_node(node)
+        while not ending.is_set() and rclpy.ok(context=node.context):
+            executor.spin_once(timeout_sec=SIGNAL_CHECK)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass                 # SIGINT / SIGTERM: cleaned up below
     except RCLError:
         # a signal can shut the context down while spin is setting up its wait set
         if rclpy.ok(context=node.context if node is not None else None):
+            reason = 'an error'
             raise
     except ParameterException as err:
         print(f'{name}: error: {parameter_error(err)}', file=sys.stderr)
+        reason = 'a parameter error'
         return 2
     except (ValueError, FileNotFoundError) as err:
         print(f'{name}: error: {err}', file=sys.stderr)
+        reason = 'an error'
         return 2
+    except BaseException:
+        reason = 'an error'
+        raise
     finally:
         if node is not None:
+            _halt(name, node, reason)
             node.destroy_node()
         try:
             rclpy.try_shutdown()
         except RCLError:
             pass             # the signal handler shut the context down at the same moment
     return 0
+
+
+def _halt(name: str, node: Node, reason: str) -> None:
+    """Let the node bring what it drives to rest before it goes (its ``halt``, if any)."""
+    halt = getattr(node, 'halt', None)
+    if halt is None or not rclpy.ok(context=node.context):
+        return
+    try:
+        halt(f'{name} is shutting down ({reason})')
+    except Exception as err:     # the node goes anyway; say why nothing was stopped
+        print(f'{name}: error: could not halt: {err!r}', file=sys.stderr)

@@ -81,6 +81,7 @@ from rcl_interfaces.msg import (
     SetParametersResult,
 )
 from rclpy.clock import Clock, ClockType
+from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, qos_profile_sensor_data, QoSProfile
 from rclpy.serialization import deserialize_message
@@ -109,6 +110,9 @@ DISCOVERY_WAIT = 3.0
 #: With use_sim_time, a /clock that has not advanced for this long on the wall clock has
 #: stopped: ~/start is refused and a run stops [s].
 CLOCK_STALL = 2.0
+#: [s] how long a node going down waits for the controller to confirm its stop (reliable DDS
+#: confirms on the writer's heartbeat, every 3 s by default)
+HALT_WAIT = 3.5
 
 
 def _float(text: str, low: float, high: float) -> ParameterDescriptor:
@@ -222,6 +226,7 @@ class PlannerNode(Node):
         for name, (default, descriptor) in PARAMETERS.items():
             self.declare_parameter(name, default, descriptor)
         self.add_on_set_parameters_callback(self._check_parameters)
+        self._run_settings()      # start-up values that do not go together: exit 2, named
         self.use_sim_time = bool(self.get_parameter('use_sim_time').value)
         self.arm = iiwa_arm(with_orientation=bool(self.get_parameter('orientation').value))
         self.joint_names = list(self.get_parameter('joint_names').value)
@@ -344,7 +349,14 @@ class PlannerNode(Node):
 
     def _on_instance(self, msg: String) -> None:
         """Leave (an error out of spin: exit 2) if an older namesake runs; else warn of it."""
-        other = json.loads(msg.data)
+        try:
+            other = json.loads(msg.data)
+            if not isinstance(other, dict):
+                raise ValueError('not an object')
+        except ValueError as err:       # someone else's message: not a reason to go
+            self.get_logger().warning(f'ignored a message on ~/instance that is not a planner\'s '
+                                      f'announcement ({err})', throttle_duration_sec=10.0)
+            return
         if other == self.instance:
             return
         message = (f'another node named {self.get_fully_qualified_name()} is running '
@@ -373,7 +385,25 @@ class PlannerNode(Node):
             return 'outside the joint limits'
         return ''
 
+    def _run_settings(self, changes: dict | None = None) -> RunSettings:
+        """
+        Return the run's settings from the parameters (with ``changes`` on top).
+
+        Raises ValueError for values that do not go together (gap_ceiling not above
+        d_dist, a load_com without three coordinates): refused when set, not at ~/start.
+        """
+        values = {name: self.get_parameter(name).value for name in RUN_FIELDS + DETECTOR_FIELDS}
+        values.update(changes or {})
+        detection = DetectorSettings(**{name: values[name] for name in DETECTOR_FIELDS})
+        return RunSettings(**{name: values[name] for name in RUN_FIELDS}, detection=detection)
+
     def _check_parameters(self, params) -> SetParametersResult:
+        changes = {p.name: p.value for p in params if p.name in RUN_FIELDS + DETECTOR_FIELDS}
+        if changes:
+            try:
+                self._run_settings(changes)
+            except (ValueError, TypeError) as err:
+                return SetParametersResult(successful=False, reason=str(err))
         for param in params:
             if param.name == 'goal':
                 problem = self._goal_problem(param.value)
@@ -554,10 +584,7 @@ class PlannerNode(Node):
                             seed=self.get_parameter('seed').value,
                             goal_tolerance=self.get_parameter('goal_tolerance').value,
                             min_retreat=self.get_parameter('min_retreat').value)
-        value = self.get_parameter
-        detection = DetectorSettings(**{name: value(name).value for name in DETECTOR_FIELDS})
-        settings = RunSettings(**{name: value(name).value for name in RUN_FIELDS},
-                               detection=detection)
+        settings = self._run_settings()
         running = self.run.trajectory if self.run is not None and own else None
         self.run = Run(self.arm, loop, settings, clock=self._now)
         self.plan_future = None
@@ -683,18 +710,21 @@ class PlannerNode(Node):
         return method.planner(self.arm, settings, self.get_parameter('length_weight').value)
 
     def _on_stop(self, request, response):
-        """Stop the run and its planning; the arm decelerates to rest, whatever it was doing."""
-        if self.run is not None:
-            active = self.active
+        """
+        Stop the run and its planning; the arm decelerates to rest, whatever it was doing.
+
+        Without a run (or after one), only from a fresh joint state: the arm may have been
+        moved since, and a stop built from an old one would pull it back there.
+        """
+        if self.active:
             self._guarded(self.run.stop, 'stopped on request')
-            response.success, response.message = True, (
-                'stopped; decelerating to rest' if active else
-                'no run active; decelerating to rest')
+            response.success, response.message = True, 'stopped; decelerating to rest'
             return response
         fresh = self._now() - self.measured_at <= self.get_parameter('state_timeout').value
-        if fresh:
-            settings = RunSettings(**{name: self.get_parameter(name).value
-                                      for name in RUN_FIELDS})
+        if fresh and self.run is not None:       # the ended run knows what JTC runs
+            self._guarded(self.run.stop, 'stopped on request')
+        elif fresh:
+            settings = self._run_settings()
             command = rest_command(self.arm, settings.limits(self.arm), self.measured,
                                    self.measured_velocity)
             self.traj_pub.publish(trajectory_msg(command, self.joint_names))
@@ -905,6 +935,20 @@ class PlannerNode(Node):
         msg = DiagnosticArray(status=[diag])
         msg.header.stamp = self.get_clock().now().to_msg()
         self.diag_pub.publish(msg)
+
+    def halt(self, reason: str) -> None:
+        """
+        Stop a run before the node goes (SIGINT, SIGTERM, an error): decelerate to rest.
+
+        Waits (up to HALT_WAIT) until the controller has the stop: a process that exits at
+        once may take an unsent message with it, and JTC would run the rest of the path.
+        """
+        if not self.active:
+            return
+        self.get_logger().warning(f'{reason}: stopping the run')
+        self._guarded(self.run.stop, reason)
+        if not self.traj_pub.wait_for_all_acked(Duration(seconds=HALT_WAIT)):
+            self.get_logger().error(f'the stop was not acknowledged within {HALT_WAIT} s')
 
     def destroy_node(self) -> None:
         """Close the bag, cancel planning (its thread is a daemon), finish the map writes."""
