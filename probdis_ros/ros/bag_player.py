@@ -90,9 +90,8 @@ def play(path: str, rate: float = 1.0, wait: float = 2.0, progress: bool = True,
             publishers = {}
             for topic, msgtype in sorted(bag.topics.items()):
                 if msgtype == COMMAND_TYPE and not commands:
-                    result.skipped[topic] = ('commands to the arm: a controller would execute '
-                                             'them (--commands publishes them, never with a '
-                                             'controller running)')
+                    result.skipped[topic] = ('commands to the arm: left out, a controller '
+                                             'would execute them')
                     continue
                 try:
                     publishers[topic] = node.create_publisher(message_class(msgtype), topic, QOS)
