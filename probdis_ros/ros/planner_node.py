@@ -40,6 +40,7 @@ from __future__ import annotations
 
 from collections import deque
 from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import TimeoutError as FutureTimeout
 from dataclasses import asdict
 import json
 import math
@@ -742,11 +743,16 @@ class PlannerNode(Node):
         self.fmap.clear()
         written = self._save_map()
         # "cleared" means cleared on disk too; if not, nothing changes, in memory either
-        if written is not None and not written.result(timeout=10.0):
+        problem = ''
+        try:
+            if written is not None and not written.result(timeout=10.0):
+                problem = self.map_error or 'the map file cannot be written'
+        except FutureTimeout:                # a hung disk: not cleared, and the node lives
+            problem = 'the map file was not written within 10 s'
+        if problem:
             self.fmap = FailureMap.from_dict(kept)
             response.success, response.message = False, (
-                f'not cleared: {self.map_error or "the map file cannot be written"}; the map '
-                f'keeps its {count} failures')
+                f'not cleared: {problem}; the map keeps its {count} failures')
         else:
             response.success, response.message = True, f'cleared {count} failures'
         self._publish_status()
