@@ -23,8 +23,14 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable
 import json
+import math
+import os
 from pathlib import Path
 import sys
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from probdis_ros.planning.methods import Method
 
 SETTINGS = ('2d', '3d', '3d-orient')
 DEFAULT_C_FAIL = 100.0   # the model's default (probdis_ros.model.failure_map), without its imports
@@ -35,6 +41,43 @@ METHODS_HELP = ('comma-separated probabilistic[:C_FAIL], hard:Y[:C_HARD], epsilo
 
 class UsageError(Exception):
     """Bad input from the user: reported as one line, exit status 2."""
+
+
+def _positive(value: float, flag: str) -> float:
+    """Return value if finite and above 0 (NaN passes ``<= 0`` checks, so test it outright)."""
+    if not (math.isfinite(value) and value > 0):
+        raise UsageError(f'{flag} must be a positive number, got {value:g}')
+    return value
+
+
+def _not_negative(value: float, flag: str) -> float:
+    """Return value if finite and at least 0."""
+    if not (math.isfinite(value) and value >= 0):
+        raise UsageError(f'{flag} must be a number >= 0, got {value:g}')
+    return value
+
+
+def _check_output(path: str | Path, flag: str = '', folder: bool = False) -> None:
+    """
+    Refuse an output that cannot be written before the work that would fill it.
+
+    ``folder``: the output is a directory (created if missing), else a file (its folders
+    are created if missing).  ``flag`` names the option that gave the path, if one did.
+    """
+    target = Path(path)
+    where = f'{flag} {path}' if flag else str(path)
+    if folder and target.exists() and not target.is_dir():
+        raise UsageError(f'{where}: not a directory')
+    if not folder and target.is_dir():
+        raise UsageError(f'{where}: is a directory')
+    existing = target if folder and target.is_dir() else target.parent
+    while not existing.exists():       # the missing folders are created on writing
+        existing = existing.parent
+    if not existing.is_dir():
+        raise UsageError(f'{where}: {existing} is not a directory')
+    if not os.access(existing, os.W_OK | os.X_OK) or \
+            (not folder and target.exists() and not os.access(target, os.W_OK)):
+        raise UsageError(f'{where}: not writable')
 
 
 def _print_json(doc: dict) -> None:
@@ -65,14 +108,13 @@ def cmd_info(args: argparse.Namespace) -> int:
 
 def cmd_fk(args: argparse.Namespace) -> int:
     """Print the forward kinematics of one configuration."""
-    import numpy as np
     from probdis_ros.model import arm_for_setting
 
     arm = arm_for_setting(args.setting)
     if len(args.joints) != arm.n_joints:
         raise UsageError(f'{args.setting} arm has {arm.n_joints} joints '
                          f'({", ".join(arm.joint_names)}); got {len(args.joints)} values')
-    config = np.array(args.joints, dtype=float)
+    config = _joint_values(args.joints, 'joint')
     inside = bool(arm.within_limits(config)[0])
     pose = arm.fk(config)
     doc = {'setting': args.setting, 'joints': config.tolist(), 'within_limits': inside,
@@ -88,6 +130,16 @@ def cmd_fk(args: argparse.Namespace) -> int:
         if not inside:
             print('warning: configuration is outside the joint limits', file=sys.stderr)
     return 0
+
+
+def _joint_values(values: list[float], what: str):
+    """Return joint positions as an array, refusing NaN and infinities (FK divides by them)."""
+    import numpy as np
+
+    bad = [v for v in values if not math.isfinite(v)]
+    if bad:
+        raise UsageError(f'{what} values must be finite numbers [rad], got {bad[0]:g}')
+    return np.array(values, dtype=float)
 
 
 def cmd_bench_fk(args: argparse.Namespace) -> int:
@@ -113,10 +165,10 @@ def cmd_experiment_sweep(args: argparse.Namespace) -> int:
         run_sweep,
         SETTINGS,
     )
-    from probdis_ros.planning.methods import Method
     from probdis_ros.sim.families import FAMILIES
 
-    methods = [Method.parse(m) for m in _split(args.methods)]
+    methods = _methods(args.methods)
+    _check_output(args.out, '--out', folder=True)
     if args.worlds < 1 or args.max_paths < 1 or \
             (args.workers is not None and args.workers < 1):
         raise UsageError('--worlds, --max-paths and --workers must be positive')
@@ -129,6 +181,7 @@ def cmd_experiment_sweep(args: argparse.Namespace) -> int:
         if unknown or not families:
             raise UsageError(f'unknown family {(unknown or [args.family])[0]!r}; choose from '
                              f'{", ".join(FAMILIES)} or all')
+        _not_negative(args.seed, '--seed')        # the first world seed
         keys = family_keys(families, args.worlds, methods, args.seed)
     else:
         settings = _split(args.setting or '2d,3d,3d-orient')
@@ -150,9 +203,7 @@ def cmd_experiment_sweep(args: argparse.Namespace) -> int:
             raise UsageError('--iterations must be positive')
         rrt['iterations'] = args.iterations
     if args.plan_time is not None:
-        if args.plan_time <= 0:
-            raise UsageError('--plan-time must be positive')
-        rrt['plan_time'] = args.plan_time
+        rrt['plan_time'] = _positive(args.plan_time, '--plan-time')
     progress = progress_line if sys.stderr.isatty() else None
     report = run_sweep(keys, Path(args.out), args.max_paths, args.scheduler, args.workers,
                        progress, rrt or None)
@@ -165,6 +216,8 @@ def cmd_experiment_report(args: argparse.Namespace) -> int:
     """Write the report of a sweep directory."""
     from probdis_ros.experiments.report import markdown_tables, write_report
 
+    for name in ('summary.json', 'summary.md'):
+        _check_output(Path(args.dir) / name)
     summary = write_report(args.dir)
     print(markdown_tables(summary), end='')
     print(f'wrote {", ".join(summary["files"])} in {args.dir}')
@@ -241,12 +294,14 @@ def _robot_worlds(args: argparse.Namespace) -> tuple[list[str], dict[str, list[s
 
 def cmd_experiment_robot(args: argparse.Namespace) -> int:
     """Run the robot scenarios through the ROS nodes against the mock iiwa (Table I)."""
-    from probdis_ros.planning.methods import Method
     from probdis_ros.ros.robot_experiment import robot_table, run_robot_experiment
 
     scenarios, groups = _robot_worlds(args)
     physics = args.engine == 'physics'
-    methods = [Method.parse(m) for m in _split(args.methods)]
+    methods = _methods(args.methods)
+    _positive(args.timeout, '--timeout')
+    _not_negative(args.real_time_factor, '--real-time-factor')
+    _check_output(args.out, '--out', folder=True)
     runs = args.runs if args.runs is not None else (10 if groups is None else 1)
     if runs < 1 or not 0 < args.velocity_scaling <= 1:
         raise UsageError('--runs must be positive and --velocity-scaling in (0, 1]')
@@ -273,11 +328,22 @@ def _split(text: str) -> list[str]:
     return [part.strip() for part in text.split(',') if part.strip()]
 
 
+def _methods(text: str) -> list[Method]:
+    """Return the methods of ``--methods``; refuse a list that names none (nothing to run)."""
+    from probdis_ros.planning.methods import Method
+
+    methods = [Method.parse(m) for m in _split(text)]
+    if not methods:
+        raise UsageError(f'--methods {text!r} names no method ({METHODS_HELP})')
+    return methods
+
+
 def cmd_map_plot(args: argparse.Namespace) -> int:
     """Draw a 2-D failure probability map as a PNG."""
     from probdis_ros.model import FailureMap
     from probdis_ros.plots import example_map, plot_map
 
+    _check_output(args.out, '--out')
     fmap = FailureMap.load(args.map) if args.map else example_map(args.c_fail)
     extent = tuple(args.extent) if args.extent else None
     title = f'{args.map}' if args.map else 'Failure probability around three failures'
@@ -288,8 +354,6 @@ def cmd_map_plot(args: argparse.Namespace) -> int:
 
 def cmd_sim(args: argparse.Namespace) -> int:
     """Run one simulated disentangling episode."""
-    import statistics
-
     if args.engine == 'physics':
         return _sim_physics(args)
 
@@ -299,6 +363,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
     from probdis_ros.sim.worlds import load_world, random_world
 
     method = Method.resolve(args.method, args.threshold, args.epsilon)
+    _check_sim_args(args)
     if args.family and (args.scenario or args.setting):
         raise UsageError('--family draws its own world (3d-orient): no --scenario or --setting')
     if args.family:
@@ -320,13 +385,32 @@ def cmd_sim(args: argparse.Namespace) -> int:
     seed = args.seed or 0
     result = run_episode(world, method, seed=seed, max_paths=args.max_paths,
                          c_fail=method.map_c_fail(args.c_fail))
+    # the result first: a plot that cannot be written after all must not lose the episode
+    if args.json:
+        _print_json(result.summary())
+    else:
+        _print_episode(result, method, world, args)
     if args.plot:
         from probdis_ros.plots import plot_episode
 
         plot_episode(result, args.plot)
-    if args.json:
-        _print_json(result.summary())
-        return 0
+        if not args.json:
+            print(f'wrote {args.plot}')
+    return 0
+
+
+def _check_sim_args(args: argparse.Namespace) -> None:
+    """Refuse sim's bad numbers and an unwritable --plot before the episode runs."""
+    if args.seed is not None:
+        _not_negative(args.seed, '--seed')
+    if args.plot:
+        _check_output(args.plot, '--plot')
+
+
+def _print_episode(result, method: Method, world, args: argparse.Namespace) -> None:
+    """Print a kinematic episode's outcome, planning times and world."""
+    import statistics
+
     outcome = 'disentangled' if result.success else 'NOT disentangled'
     times = result.plan_times_s
     empty = f' ({result.empty_plans} of them empty plans)' if result.empty_plans else ''
@@ -338,9 +422,6 @@ def cmd_sim(args: argparse.Namespace) -> int:
               f'max {max(times):.3f} s')
     if world.rejected_draws:
         print(f'(world drawn after {world.rejected_draws} rejected unsolvable draws)')
-    if args.plot:
-        print(f'wrote {args.plot}')
-    return 0
 
 
 def _sim_physics(args: argparse.Namespace) -> int:
@@ -354,6 +435,7 @@ def _sim_physics(args: argparse.Namespace) -> int:
     if args.scenario or args.setting:
         raise UsageError('--engine physics runs a --scene or a --family, not a --scenario '
                          'or --setting')
+    _check_sim_args(args)
     scene = args.scene or 'demo_hook'
     if args.family:
         from probdis_ros.physics.family_scenes import draw_family_scene
@@ -368,6 +450,16 @@ def _sim_physics(args: argparse.Namespace) -> int:
     method = Method.resolve(args.method, args.threshold, args.epsilon)
     episode = run_physics_episode(scene, method, seed=args.seed or 0,
                                   max_paths=args.max_paths)
+    summary = episode.summary()
+    # the result first: a plot that cannot be written after all must not lose the episode
+    if args.json:
+        _print_json(summary)
+    else:
+        outcome = 'disentangled' if episode.success else f'NOT disentangled ({episode.message})'
+        print(f'{episode.scene.name}: {method}: {outcome} after {episode.paths} path(s), '
+              f'{len(episode.failures)} failure(s) learned; {summary["sim_time_s"]} s '
+              f'simulated in {summary["wall_time_s"]} s ({summary["real_time_factor"]}x real '
+              f'time), peak contact force {summary["peak_contact_force_n"]} N')
     if args.plot:
         arm = iiwa_arm()
         failures = [(np.array(f['x']), np.array(f['v'])) for f in episode.failures]
@@ -376,17 +468,8 @@ def _sim_physics(args: argparse.Namespace) -> int:
                        arm.fk(episode.scene.goal[None]).positions[0], args.plot,
                        f'{episode.scene.name}: {method}: {outcome} after {episode.paths} '
                        f'path(s), {len(failures)} failure(s)')
-    if args.json:
-        _print_json(episode.summary())
-        return 0
-    summary = episode.summary()
-    outcome = 'disentangled' if episode.success else f'NOT disentangled ({episode.message})'
-    print(f'{episode.scene.name}: {method}: {outcome} after {episode.paths} path(s), '
-          f'{len(episode.failures)} failure(s) learned; {summary["sim_time_s"]} s simulated '
-          f'in {summary["wall_time_s"]} s ({summary["real_time_factor"]}x real time), peak '
-          f'contact force {summary["peak_contact_force_n"]} N')
-    if args.plot:
-        print(f'wrote {args.plot}')
+        if not args.json:
+            print(f'wrote {args.plot}')
     return 0
 
 
@@ -397,6 +480,7 @@ def cmd_bench_physics(args: argparse.Namespace) -> int:
     from probdis_ros.bench import machine
     from probdis_ros.physics import measure
 
+    _positive(args.seconds, '--seconds')
     figures = {'machine': machine(),
                'real_time_factor': measure.real_time_factor(args.scene, args.seconds),
                'free_tracking': [asdict(measure.free_tracking(v, args.scene))
@@ -429,29 +513,35 @@ def cmd_bench_physics(args: argparse.Namespace) -> int:
 
 def cmd_plan(args: argparse.Namespace) -> int:
     """Plan one path on a saved failure map and print it."""
-    import numpy as np
     from probdis_ros.model import arm_for_setting, FailureMap
     from probdis_ros.model.path_cost import path_success_probability
     from probdis_ros.planning import Method, RRTSettings
     from probdis_ros.planning.seeds import PLANNER, stream
 
+    if args.plan_time is not None:
+        _positive(args.plan_time, '--plan-time')
+    _positive(args.delta, '--delta')
+    _not_negative(args.length_weight, '--length-weight')
+    _not_negative(args.seed, '--seed')
+    method = Method.parse(args.method)
+    if method.name == 'epsilon':
+        raise UsageError('epsilon does not plan on a map; use probabilistic, hard:Y or '
+                         'informed')
     fmap = FailureMap.load(args.map)
+    # probabilistic:C_FAIL plans with its C_FAIL, as sim does (not the one the map was saved with)
+    fmap = FailureMap.from_dict({**fmap.to_dict(), 'c_fail': method.map_c_fail(fmap.c_fail)},
+                                args.map)
     setting = {'point2': '2d', 'point3': '3d', 'pose3': '3d-orient'}[fmap.task_space.value]
     arm = arm_for_setting(setting)
     ends = []
     for name in ('start', 'goal'):
-        config = np.array(getattr(args, name), dtype=float)
+        config = _joint_values(getattr(args, name), f'--{name}')
         if len(config) != arm.n_joints:
             raise UsageError(f'--{name} needs {arm.n_joints} joint values for a '
                              f'{fmap.task_space.value} map, got {len(config)}')
         ends.append(config)
-    if args.plan_time is not None and args.plan_time <= 0:
-        raise UsageError('--plan-time must be positive')
     settings = RRTSettings(iterations=args.iterations, delta=args.delta,
                            plan_time=args.plan_time or 0.0)
-    method = Method.parse(args.method)
-    if method.name == 'epsilon':
-        raise UsageError('epsilon does not plan on a map; use probabilistic or hard:Y')
     planner = method.planner(arm, settings, args.length_weight)
     plan = planner.plan(ends[0], ends[1], fmap, stream(args.seed, PLANNER))
     if plan is None:
@@ -488,6 +578,7 @@ def cmd_service(args: argparse.Namespace) -> int:
     from probdis_ros.ros.client import PlannerClient
 
     service = {'start': 'start', 'stop': 'stop', 'reset-map': 'reset_map'}[args.command]
+    _positive(args.timeout, '--timeout')      # NaN would wait forever
     with PlannerClient(args.planner) as client:
         try:
             ok, message = client.call(service, args.timeout)
@@ -502,6 +593,7 @@ def cmd_status(args: argparse.Namespace) -> int:
     """Print the planner's latest status (JSON)."""
     from probdis_ros.ros.client import PlannerClient
 
+    _positive(args.timeout, '--timeout')      # NaN would wait forever
     with PlannerClient(args.planner) as client:
         try:
             doc = client.status(args.timeout)
@@ -519,6 +611,9 @@ def cmd_demo(args: argparse.Namespace) -> int:
     world = args.scenario or (DEFAULT_SCENE if args.engine == 'physics' else 'demo_iiwa')
     if args.plot and args.engine != 'physics':
         raise UsageError('--plot draws a physics scene; use --engine physics')
+    _positive(args.timeout, '--timeout')      # before the nodes start
+    if args.plot:
+        _check_output(args.plot, '--plot')
     result = run_demo(world, args.timeout, quiet=args.json, engine=args.engine,
                       sim_time=args.sim_time)
     summary = {k: result[k] for k in ('success', 'paths', 'failures', 'replan_latency_s')}
@@ -560,21 +655,30 @@ def _plot_bag(scene_name: str, bag: str, out: str) -> Path:
 
 def cmd_replay(args: argparse.Namespace) -> int:
     """Rerun the blocked-motion detector on a bag; rebuild the failure map."""
-    from probdis_ros.ros.replay import replay, ReplayError
+    from probdis_ros.ros.replay import replay, ReplayError, SettingsError
 
     if args.publish:
         return _publish_bag(args)
-    overrides = {k: v for k, v in (('d_dist', args.d_dist), ('motion_delay', args.motion_delay))
-                 if v is not None}
+    if args.rate is not None or args.wait is not None:
+        raise UsageError('--rate and --wait go with --publish')
+    overrides = _replay_overrides(args)
+    for flag, out in (('--save-map', args.save_map), ('--plot', args.plot)):
+        if out:
+            _check_output(out, flag)
     status = 0
     try:
         result = replay(args.bag, args.joint_states, args.trajectory, overrides=overrides)
+    except SettingsError as err:
+        given = ' '.join(f'--{k.replace("_", "-")} {v:g}' for k, v in overrides.items())
+        raise UsageError(f'{given}: {err}') from None
     except ReplayError as err:
         if err.partial is None:
             raise UsageError(str(err)) from None
-        print(f'probdis replay: error: {err}', file=sys.stderr)
+        # what came before the damage is shown, but not saved over a map file
+        kept = ' (--save-map not written: the bag is damaged)' if args.save_map else ''
+        print(f'probdis replay: error: {err}{kept}', file=sys.stderr)
         result, status = err.partial, 1
-    if args.save_map:
+    if args.save_map and status == 0:
         result.fmap.save(args.save_map)
     if args.plot:
         from probdis_ros.plots import plot_replay
@@ -591,11 +695,21 @@ def cmd_replay(args: argparse.Namespace) -> int:
         print(f'  block at {block.t:8.3f} s, flange at ({x}) m, during {during}')
     for problem in result.problems[:10]:
         print(f'  note: {problem}')
-    if args.save_map:
+    if args.save_map and status == 0:
         print(f'wrote {args.save_map} ({len(result.fmap)} failures)')
     if args.plot:
         print(f'wrote {args.plot}')
     return status
+
+
+def _replay_overrides(args: argparse.Namespace) -> dict[str, float]:
+    """Return the detector settings of --d-dist and --motion-delay, checked before any reading."""
+    overrides = {}
+    if args.d_dist is not None:
+        overrides['d_dist'] = _positive(args.d_dist, '--d-dist')
+    if args.motion_delay is not None:
+        overrides['motion_delay'] = _not_negative(args.motion_delay, '--motion-delay')
+    return overrides
 
 
 def _publish_bag(args: argparse.Namespace) -> int:
@@ -603,10 +717,10 @@ def _publish_bag(args: argparse.Namespace) -> int:
     from probdis_ros.ros.bag_player import play
     from probdis_ros.ros.bag_source import BagError
 
-    if not args.rate > 0 or args.wait < 0:
-        raise UsageError('--rate must be positive and --wait not negative')
+    rate = _positive(1.0 if args.rate is None else args.rate, '--rate')
+    wait = _not_negative(2.0 if args.wait is None else args.wait, '--wait')
     try:
-        result = play(args.bag, args.rate, args.wait, progress=sys.stderr.isatty())
+        result = play(args.bag, rate, wait, progress=sys.stderr.isatty())
     except BagError as err:
         raise UsageError(str(err)) from None
     if args.json:
@@ -685,7 +799,8 @@ def build_parser() -> argparse.ArgumentParser:
     plan.add_argument('--length-weight', type=float, default=DEFAULT_LENGTH_WEIGHT,
                       help='lambda: weight of joint-space length')
     plan.add_argument('--method', default='probabilistic',
-                      help='probabilistic or hard:Y[:C_HARD]')
+                      help='a method string: probabilistic[:C_FAIL] (C_FAIL replaces the '
+                      "map's), hard:Y[:C_HARD] or informed[:IDEAS] (default probabilistic)")
     plan.add_argument('--json', action='store_true', help='print {"path", "cost", '
                       '"success_probability", "plan_time_s"}')
     plan.set_defaults(handler=cmd_plan)
@@ -769,15 +884,17 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument('--motion-delay', type=float, help='how far the arm lags its command [s] '
                     '(default: as the recording planner ran)')
     rp.add_argument('--json', action='store_true',
-                    help='print {"paths", "blocks": [{"t", "x"}], "failures", "success"}')
+                    help='print {"paths", "blocks": [{"t", "x", "retreat"}], "failures", '
+                    '"success"}')
     rp.add_argument('--plot', metavar='OUT.png', help='joint gaps and the flange path')
     rp.add_argument('--save-map', metavar='FILE', help='write the rebuilt failure map')
     rp.add_argument('--publish', action='store_true',
                     help='republish the messages on their topics with their recorded timing')
-    rp.add_argument('--rate', type=float, default=1.0,
-                    help='with --publish: speed factor of the recorded timing')
-    rp.add_argument('--wait', type=float, default=2.0,
-                    help='with --publish: seconds to wait for subscribers before starting')
+    rp.add_argument('--rate', type=float,
+                    help='with --publish: speed factor of the recorded timing (default 1)')
+    rp.add_argument('--wait', type=float,
+                    help='with --publish: seconds to wait for subscribers before starting '
+                    '(default 2)')
     rp.set_defaults(handler=cmd_replay)
 
     fmap = sub.add_parser('map', help='failure maps')
@@ -860,8 +977,25 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Run the command line; return the exit status."""
+def _command_name(args: argparse.Namespace) -> str:
+    """Return the subcommand as typed (``experiment sweep``), to head its error lines."""
+    words = [args.command] + [getattr(args, name) for name in
+                              ('experiment_command', 'map_command', 'bench')
+                              if getattr(args, name, None)]
+    return ' '.join(words)
+
+
+def _describe(err: Exception) -> str:
+    """Return an error as one line: an OSError as its file and reason, without ``[Errno]``."""
+    if isinstance(err, OSError) and err.filename is not None:
+        # of a rename, the target (a temporary file's name would tell the user nothing)
+        name = err.filename if err.filename2 is None else err.filename2
+        return f'{name}: {err.strerror or err}'
+    return str(err)
+
+
+def _run(argv: list[str] | None) -> int:
+    """Parse the arguments and run the subcommand; errors as one line, exit status 2."""
     parser = build_parser()
     argv = sys.argv[1:] if argv is None else list(argv)
     if argv and argv[0] in ('planner', 'mock') and not {'-h', '--help'} & set(argv[1:2]):
@@ -875,13 +1009,29 @@ def main(argv: list[str] | None = None) -> int:
 
     try:
         return handler(args)
-    except (UsageError, FailureMapError, ScenarioError, FileNotFoundError, ValueError,
-            RuntimeError, TimeoutError) as err:
-        print(f'probdis: error: {err}', file=sys.stderr)
+    except BrokenPipeError:
+        raise                 # the reader left: main() ends quietly
+    except (UsageError, FailureMapError, ScenarioError, OSError, ValueError,
+            RuntimeError) as err:
+        print(f'probdis {_command_name(args)}: error: {_describe(err)}', file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print('probdis: interrupted', file=sys.stderr)
         return 130
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the command line; return the exit status (1, quietly, when stdout's reader left)."""
+    try:
+        try:
+            return _run(argv)
+        finally:
+            sys.stdout.flush()     # here, not at exit, where a closed pipe cannot be caught
+    except BrokenPipeError:
+        # `probdis plan ... | head`: what is still buffered goes nowhere (Python docs, SIGPIPE)
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 1
 
 
 if __name__ == '__main__':

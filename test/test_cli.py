@@ -15,6 +15,7 @@
 """The ``probdis`` command line, run as a real process."""
 
 import json
+import subprocess
 
 import numpy as np
 from probdis_ros.model import FailureMap, TaskSpace
@@ -188,3 +189,120 @@ def test_sim_draws_a_family_world_from_the_seed(probdis):
     assert bad.returncode == 2 and "unknown family 'nope'" in bad.stderr
     bad = probdis('sim', '--family', 'open_box', '--setting', '2d', check=False)
     assert bad.returncode == 2 and '--family draws its own world' in bad.stderr
+
+
+def one_line_error(result, command: str, text: str) -> None:
+    """Assert a refusal: exit 2, one stderr line naming the command and saying text."""
+    assert result.returncode == 2, (result.stdout, result.stderr)
+    assert result.stderr.count('\n') == 1, result.stderr
+    assert result.stderr.startswith(f'probdis {command}: error: ') and text in result.stderr, \
+        result.stderr
+
+
+def test_nan_negative_and_empty_values_are_refused_naming_the_flag(probdis, tmp_path):
+    for args, command, text in [
+            (('fk', 'nan', '0', '0', '0', '0', '0', '0'), 'fk', 'got nan'),
+            (('sim', '--seed', '-1'), 'sim', '--seed must be a number >= 0, got -1'),
+            (('bench', 'physics', '--seconds', '-1'), 'bench physics',
+             '--seconds must be a positive number, got -1'),
+            (('demo', '--timeout', '0'), 'demo', '--timeout must be a positive number, got 0'),
+            (('demo', '--timeout', '-5'), 'demo', '--timeout must be a positive'),
+            (('experiment', 'sweep', '--plan-time', 'nan', '--out', str(tmp_path / 's')),
+             'experiment sweep', '--plan-time must be a positive number, got nan'),
+            (('experiment', 'sweep', '--methods', ',', '--out', str(tmp_path / 's')),
+             'experiment sweep', "--methods ',' names no method"),
+            (('experiment', 'robot', '--offline', '--methods', ' , ',
+              '--out', str(tmp_path / 'r')), 'experiment robot', 'names no method')]:
+        one_line_error(probdis(*args, check=False, timeout=60), command, text)
+    assert not (tmp_path / 'r' / 'robot_runs.jsonl').exists()
+
+
+def test_plan_refuses_nan_and_plans_with_the_c_fail_of_its_method(probdis, tmp_path):
+    fmap = FailureMap(TaskSpace.POINT2, 100.0)
+    fmap.add([0.0, 0.7], [1.0, 0.0])
+    fmap.save(tmp_path / 'map.json')
+    ends = ('plan', '--map', str(tmp_path / 'map.json'), '--start', '2.17', *['0'] * 6,
+            '--goal', '0.97', *['0'] * 6, '--seed', '2', '--json')
+    args = (*ends, '--iterations', '30')
+
+    def cost(method):
+        return json.loads(probdis(*args, '--method', method).stdout)['cost']
+
+    # the map was saved with C_FAIL 100: probabilistic:100 is the map's own, :5 is not
+    assert cost('probabilistic:100') == cost('probabilistic')
+    assert cost('probabilistic:5') != cost('probabilistic')
+    one_line_error(probdis(*ends, '--plan-time', 'nan', check=False), 'plan',
+                   '--plan-time must be a positive number, got nan')
+    bad_start = list(args)
+    bad_start[bad_start.index('2.17')] = 'nan'
+    one_line_error(probdis(*bad_start, check=False), 'plan', '--start values must be finite')
+    assert 'informed' in ' '.join(probdis('plan', '--help').stdout.split())
+
+
+def test_outputs_that_cannot_be_written_are_refused_before_the_work(probdis, tmp_path):
+    afile = tmp_path / 'afile'
+    afile.write_text('not a folder\n')
+    for args, command, text in [
+            (('experiment', 'sweep', '--out', str(afile)), 'experiment sweep',
+             f'--out {afile}: not a directory'),
+            (('experiment', 'sweep', '--out', str(afile / 'x')), 'experiment sweep',
+             f'{afile} is not a directory'),
+            (('experiment', 'robot', '--offline', '--out', str(afile)), 'experiment robot',
+             f'--out {afile}: not a directory'),
+            (('map', 'plot', '--out', str(afile / 'map.png')), 'map plot',
+             f'{afile} is not a directory'),
+            (('map', 'plot', '--out', str(tmp_path)), 'map plot', 'is a directory'),
+            (('sim', '--plot', str(afile / 'sim.png')), 'sim', f'{afile} is not a directory'),
+            (('sim', '--engine', 'physics', '--plot', str(tmp_path)), 'sim', 'is a directory')]:
+        one_line_error(probdis(*args, check=False, timeout=60), command, text)
+    assert afile.read_text() == 'not a folder\n'
+
+
+def test_a_reader_that_stops_reading_ends_the_command_quietly(tmp_path):
+    from conftest import probdis_command
+
+    # `probdis ... | head -0`: stdout is closed before anything is written to it
+    process = subprocess.Popen([*probdis_command(), 'fk', *['0'] * 7], stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True)
+    process.stdout.close()
+    _, stderr = process.communicate(timeout=60)
+    assert process.returncode == 1 and stderr == ''
+
+
+def test_the_robot_experiment_refuses_a_folder_of_runs_with_other_settings(probdis, tmp_path):
+    record = {'scenario': 'demo_hook', 'method': 'probabilistic', 'run': 0, 'seed': 0,
+              'engine': 'physics', 'velocity_scaling': 0.2, 'success': True, 'paths': 3,
+              'failures': 2, 'wall_s': 1.0, 'bag': None, 'offline': True, 'detection': {}}
+    runs = tmp_path / 'robot_runs.jsonl'
+    runs.write_text(json.dumps(record) + '\n')
+    args = ('experiment', 'robot', '--offline', '--runs', '1', '--scenarios', 'demo_hook',
+            '--methods', 'probabilistic', '--out', str(tmp_path))
+    for extra, text in [(('--detection', 'gap_ceiling=0.6'),
+                         "detection {}, not {'gap_ceiling': 0.6}"),
+                        (('--velocity-scaling', '0.5'), 'velocity_scaling 0.2, not 0.5')]:
+        one_line_error(probdis(*args, *extra, check=False), 'experiment robot',
+                       f'{runs} holds runs of another experiment ({text})')
+    assert runs.read_text() == json.dumps(record) + '\n'
+    # the same settings: the run is there, nothing runs again
+    assert '| demo_hook | 1 / 1 |' in probdis(*args).stdout
+
+
+def test_an_offline_run_that_fails_is_tried_again_offline(tmp_path, monkeypatch, capsys):
+    from probdis_ros import cli
+    from probdis_ros.ros import robot_experiment
+
+    calls = []
+
+    def flaky(scenario, method, run, velocity_scaling, detection):
+        calls.append((scenario, str(method), run))
+        if len(calls) == 1:
+            raise RuntimeError('the simulation did not start')
+        return {'success': True, 'paths': 2, 'failures': 1, 'bag': None}
+
+    monkeypatch.setattr(robot_experiment, 'offline_run', flaky)
+    status = cli.main(['experiment', 'robot', '--offline', '--runs', '1', '--scenarios',
+                       'demo_hook', '--methods', 'informed:af', '--out', str(tmp_path),
+                       '--json'])
+    assert status == 0 and calls == [('demo_hook', 'informed:af', 0)] * 2
+    records = json.loads(capsys.readouterr().out)
+    assert [(r['success'], r['offline']) for r in records] == [(True, True)]

@@ -273,3 +273,47 @@ def test_the_claims_compare_with_the_best_baseline_and_find_ranking_flips():
     assert hard['best_by_obstacles'] == {1: 'hard:0.02', 10: 'hard:0.01'}
     assert hard['best_changes'] and abs(hard['largest_gap'] - 0.25) < 1e-12
     assert [f['family'] for f in verdicts['sensitivity']] == ['hard']   # one epsilon value
+
+
+def report_record(world, method='probabilistic'):
+    """Return an episode record as the sweep writes it (the fields the report reads)."""
+    return {'setting': '2d', 'obstacles': 1, 'method': method, 'max_paths': 20,
+            'success': True, 'paths': 2, 'plan_times_s': [0.01, 0.01], 'wall_s': 1.0,
+            'empty_plans': 0, 'world': world}
+
+
+def run_report(directory):
+    return subprocess.run([*probdis_command(), 'experiment', 'report', str(directory)],
+                          capture_output=True, text=True, timeout=120)
+
+
+def test_the_report_names_a_record_that_is_no_episode_and_an_unwritable_summary(tmp_path):
+    episodes = tmp_path / EPISODES_FILE
+    episodes.write_text(json.dumps(report_record(0)) + '\n{"a": 1}\n')
+    result = run_report(tmp_path)
+    assert result.returncode == 2 and result.stderr.count('\n') == 1, result.stderr
+    assert result.stderr.startswith('probdis experiment report: error: ') and \
+        'record 2 is not an episode record' in result.stderr
+    episodes.write_text(json.dumps(report_record(0)) + '\n')
+    (tmp_path / 'summary.json').mkdir()           # where the summary goes: not writable
+    result = run_report(tmp_path)
+    assert result.returncode == 2 and result.stderr.count('\n') == 1, result.stderr
+    assert 'summary.json: is a directory' in result.stderr
+
+
+def test_a_summary_that_cannot_be_written_whole_leaves_the_previous_one(tmp_path, monkeypatch):
+    (tmp_path / EPISODES_FILE).write_text(''.join(json.dumps(report_record(w)) + '\n'
+                                                  for w in range(3)))
+    write_report(tmp_path)
+    before = {name: (tmp_path / name).read_text() for name in ('summary.json', 'summary.md')}
+    with (tmp_path / EPISODES_FILE).open('a') as stream:
+        stream.write(json.dumps(report_record(3, 'epsilon:0.2')) + '\n')
+
+    def disk_full(fd):
+        raise OSError(28, 'No space left on device')
+
+    monkeypatch.setattr(os, 'fsync', disk_full)     # the write does not reach the disk
+    with pytest.raises(OSError, match='No space left'):
+        write_report(tmp_path)
+    assert {name: (tmp_path / name).read_text() for name in before} == before
+    assert not [p.name for p in tmp_path.iterdir() if p.name.endswith('.tmp')]

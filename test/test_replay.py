@@ -323,11 +323,15 @@ def test_a_bag_cut_midway_reports_what_came_before_the_damage(tmp_path):
     write_mcap_library_bag(tmp_path / 'arm.mcap', messages, chunk_size=4096)
     data = (tmp_path / 'arm.mcap').read_bytes()
     (tmp_path / 'arm.mcap').write_bytes(data[: len(data) * 6 // 10])
-    result = run_replay(tmp_path / 'arm.mcap', '--json')
+    (tmp_path / 'map.json').write_text('the map of another run\n')
+    result = run_replay(tmp_path / 'arm.mcap', '--json', '--save-map', str(tmp_path / 'map.json'))
     assert result.returncode == 1
     error = result.stderr.strip().splitlines()
     assert len(error) == 1 and 'arm.mcap is damaged at byte' in error[0], result.stderr
     assert json.loads(result.stdout)['paths'] == 1        # the command came before the cut
+    # what came before the damage is shown, not saved over a map file
+    assert '--save-map not written' in error[0]
+    assert (tmp_path / 'map.json').read_text() == 'the map of another run\n'
     with pytest.raises(ReplayError) as err:
         replay(tmp_path / 'arm.mcap')
     total = sum(1 for m in messages if m[1] == JS)
@@ -356,8 +360,34 @@ def test_unknown_types_are_ignored_unless_needed(tmp_path):
     assert len(replay(tmp_path / 'extra').blocks) == 1
     result = run_replay(tmp_path / 'extra', '--joint-states', '/lab/gizmo')
     assert result.returncode != 0
-    assert 'probdis: error:' in result.stderr and \
+    assert 'probdis replay: error:' in result.stderr and \
         '/lab/gizmo carries lab_msgs/msg/Gizmo, not sensor_msgs/msg/JointState' in result.stderr
+
+
+def test_bad_replay_flags_are_refused_before_the_bag_is_read(tmp_path):
+    messages, _, _ = simulated_run()
+    write_bag(tmp_path / 'bag', messages, 9, StoragePlugin.MCAP)
+    keep = tmp_path / 'keep_map.json'
+    keep.write_text('the map of another run\n')
+    for args, text in [
+            (('--d-dist', '-1', '--save-map', str(keep)), '--d-dist must be a positive number'),
+            (('--d-dist', 'nan'), '--d-dist must be a positive number, got nan'),
+            (('--motion-delay', '-0.1'), '--motion-delay must be a number >= 0'),
+            (('--motion-delay', 'inf'), '--motion-delay must be a number >= 0, got inf'),
+            # not damage of the bag: a d_dist the detector's other thresholds do not allow
+            (('--d-dist', '0.5', '--save-map', str(keep)), '--d-dist 0.5: gap_ceiling 0.3 '
+             'must exceed d_dist 0.5'),
+            (('--save-map', str(tmp_path)), f'--save-map {tmp_path}: is a directory'),
+            (('--plot', str(keep / 'x.png')), f'{keep} is not a directory'),
+            (('--rate', '2'), '--rate and --wait go with --publish')]:
+        result = run_replay(tmp_path / 'bag', *args)
+        assert result.returncode == 2 and result.stdout == '', (args, result.stderr)
+        assert result.stderr.count('\n') == 1 and result.stderr.startswith(
+            'probdis replay: error: ') and text in result.stderr, (args, result.stderr)
+        assert 'damaged' not in result.stderr
+    assert keep.read_text() == 'the map of another run\n'
+    assert run_replay(tmp_path / 'bag', '--save-map', str(keep)).returncode == 0
+    assert json.loads(keep.read_text())['failures']     # the block, in place of the old map
 
 
 def run_replay(bag, *args):

@@ -71,6 +71,21 @@ def test_service_commands_against_a_running_planner(env, tmp_path):
     assert timeout.returncode == 3 and 'is the planner running' in timeout.stderr
 
 
+def test_bad_timeouts_and_planner_names_are_one_line_errors(env):
+    # a NaN timeout never passes its deadline: it would wait forever
+    for command, args, text in [
+            ('status', ('--timeout', 'nan'), '--timeout must be a positive number, got nan'),
+            ('start', ('--timeout', 'nan'), '--timeout must be a positive number, got nan'),
+            ('stop', ('--timeout', '-1'), '--timeout must be a positive number, got -1'),
+            ('reset-map', ('--timeout', '0'), '--timeout must be a positive number, got 0'),
+            ('start', ('--planner', 'bad name!', '--timeout', '1'),
+             "'bad name!' is not a valid planner node name")]:
+        result = run(env, command, *args, timeout=30)
+        assert result.returncode == 2, result.stderr
+        assert result.stderr.count('\n') == 1 and result.stderr.startswith(
+            f'probdis {command}: error: ') and text in result.stderr, result.stderr
+
+
 def test_the_demo_waits_for_a_planner_still_coming_up_and_stops_when_it_dies(env, monkeypatch):
     # a fresh install's planner compiles its kernels for 20-50 s before its
     # service is up: the demo waits for it while it lives, and says why

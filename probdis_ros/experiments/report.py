@@ -31,6 +31,7 @@ from __future__ import annotations
 
 from collections import defaultdict
 import json
+import os
 from pathlib import Path
 import statistics
 
@@ -39,6 +40,9 @@ from probdis_ros.experiments.sweep import EPISODES_FILE, read_episodes
 
 BOOTSTRAP_SAMPLES = 2000
 BOOTSTRAP_SEED = 0
+#: The fields the report reads from every episode record (``sweep.run_sweep`` writes them).
+EPISODE_FIELDS = ('setting', 'obstacles', 'method', 'max_paths', 'success', 'paths',
+                  'plan_times_s', 'wall_s')
 
 
 def bootstrap_ci(values: np.ndarray, samples: int = BOOTSTRAP_SAMPLES,
@@ -270,6 +274,35 @@ def plot_family_curves(summary: dict, out: str | Path) -> Path:
     return _save(fig, out)
 
 
+def check_records(records: list, source: str | Path) -> list[dict]:
+    """Return the records if each is an episode record; else ValueError naming the first not."""
+    for number, record in enumerate(records, start=1):
+        missing = [f for f in EPISODE_FIELDS if f not in record] \
+            if isinstance(record, dict) else list(EPISODE_FIELDS)
+        if missing:
+            raise ValueError(f'{source}: record {number} is not an episode record (no '
+                             f'{missing[0]!r})')
+    return records
+
+
+def _write_atomically(path: Path, text: str) -> None:
+    """
+    Write a text file as the failure maps are written: temporary file, fsync, rename.
+
+    A report killed midway leaves the previous summary or the new one, never half of one.
+    """
+    tmp = path.with_name(f'.{path.name}.{os.getpid()}.tmp')
+    try:
+        with tmp.open('x') as out:
+            out.write(text)
+            out.flush()
+            os.fsync(out.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
 def write_report(directory: str | Path) -> dict:
     """
     Read DIR/episodes.jsonl; write the figures, summary.json and summary.md into DIR.
@@ -279,7 +312,7 @@ def write_report(directory: str | Path) -> dict:
     from probdis_ros.plots import plot_sensitivity, plot_success_curves
 
     directory = Path(directory)
-    records = read_episodes(directory / EPISODES_FILE)
+    records = check_records(read_episodes(directory / EPISODES_FILE), directory / EPISODES_FILE)
     if not records:
         raise ValueError(f'{directory / EPISODES_FILE}: no episodes (run probdis experiment '
                          'sweep first)')
@@ -298,6 +331,6 @@ def write_report(directory: str | Path) -> dict:
         plot_family_curves(summary, directory / 'families.png')
         files.append('families.png')
     summary['files'] = [*files, 'summary.json', 'summary.md']
-    (directory / 'summary.json').write_text(json.dumps(summary, indent=1) + '\n')
-    (directory / 'summary.md').write_text('\n'.join(text))
+    _write_atomically(directory / 'summary.json', json.dumps(summary, indent=1) + '\n')
+    _write_atomically(directory / 'summary.md', '\n'.join(text))
     return summary

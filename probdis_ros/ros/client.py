@@ -22,11 +22,13 @@ process (``probdis start``) as well as inside ``probdis demo``.
 from __future__ import annotations
 
 import json
+import math
 import os
 import time
 
 import rclpy
 from rclpy.context import Context
+from rclpy.exceptions import NameValidationException
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import DurabilityPolicy, QoSProfile
 from std_msgs.msg import String
@@ -42,6 +44,17 @@ class NoAnswerError(TimeoutError):
     """A request reached the service but no answer came back: it may have taken effect."""
 
 
+def check_timeout(timeout: float) -> float:
+    """
+    Return timeout [s] if finite: a NaN or infinite deadline is never passed.
+
+    One of 0 or less looks once (the demo's waits count down to it); the CLI refuses those.
+    """
+    if not math.isfinite(timeout):
+        raise ValueError(f'timeout must be a finite number of seconds, got {timeout}')
+    return timeout
+
+
 class PlannerClient:
     """Calls the planner's services and reads its status."""
 
@@ -54,7 +67,14 @@ class PlannerClient:
         self.executor.add_node(self.node)
         self.latest: dict | None = None
         latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        self.node.create_subscription(String, f'{planner}/status', self._on_status, latched)
+        try:
+            self.node.create_subscription(String, f'{planner}/status', self._on_status, latched)
+        except NameValidationException as err:
+            self.close()
+            # rclpy's message spans lines (the name, a caret under the fault): keep the reason
+            reason = str(err).splitlines()[0].partition(': ')[2].rstrip(':')
+            raise ValueError(f'{planner!r} is not a valid planner node name '
+                             f'({reason})') from None
 
     def _on_status(self, msg: String) -> None:
         self.latest = json.loads(msg.data)
@@ -66,13 +86,14 @@ class PlannerClient:
         TimeoutError if the service is not there within timeout [s]; :class:`NoAnswerError`
         if it was called but its answer did not come within timeout of the call.
         """
+        check_timeout(timeout)
         client = self.node.create_client(Trigger, f'{self.planner}/{service}')
         try:
             deadline = time.monotonic() + timeout
             while not client.service_is_ready():
                 if time.monotonic() > deadline:
                     raise TimeoutError(f'no {self.planner}/{service} service within '
-                                       f'{timeout:.0f} s; is the planner running? '
+                                       f'{timeout:g} s; is the planner running? '
                                        f'({FIRST_START})')
                 self.executor.spin_once(timeout_sec=0.05)
             # the answer has its own time: a service that came up just before the deadline
@@ -82,7 +103,7 @@ class PlannerClient:
             while not future.done():
                 if time.monotonic() > deadline:
                     raise NoAnswerError(f'{self.planner}/{service} did not answer within '
-                                        f'{timeout:.0f} s; the call may have taken effect '
+                                        f'{timeout:g} s; the call may have taken effect '
                                         f'(probdis status tells)')
                 self.executor.spin_once(timeout_sec=0.05)
             response = future.result()
@@ -92,12 +113,13 @@ class PlannerClient:
 
     def status(self, timeout: float = 5.0, newer_than: dict | None = None) -> dict:
         """Wait for the latest status document (one differing from newer_than, if given)."""
+        check_timeout(timeout)
         deadline = time.monotonic() + timeout
         while self.latest is None or (newer_than is not None and self.latest == newer_than):
             if time.monotonic() > deadline:
                 if self.latest is not None:
                     return self.latest
-                raise TimeoutError(f'no status from {self.planner} within {timeout:.0f} s')
+                raise TimeoutError(f'no status from {self.planner} within {timeout:g} s')
             self.executor.spin_once(timeout_sec=0.05)
         return self.latest
 

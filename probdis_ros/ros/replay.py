@@ -66,6 +66,24 @@ class ReplayError(Exception):
         self.partial = partial
 
 
+class SettingsError(ValueError):
+    """Detector overrides that do not fit (the defaults, or the settings the bag recorded)."""
+
+
+def detector_settings(recorded: dict, overrides: dict) -> DetectorSettings:
+    """
+    Return the recorded detector settings changed by overrides.
+
+    A recording that cannot be used is the bag's problem (ValueError); overrides that do
+    not fit it are the caller's (:class:`SettingsError`), not damage of the bag.
+    """
+    settings = DetectorSettings(**recorded)
+    try:
+        return replace(settings, **overrides)
+    except (TypeError, ValueError) as err:
+        raise SettingsError(str(err)) from None
+
+
 @dataclass
 class Block:
     """
@@ -114,8 +132,12 @@ def replay(bag: str | Path, joint_states_topic: str = JOINT_STATES,
     Replay a bag; raise ReplayError (carrying the partial result) on a damaged bag.
 
     The detector runs with settings, or else with those the recording planner ran with (its
-    status carries them) or the defaults, changed by overrides (e.g. ``{'d_dist': 0.1}``).
+    status carries them) or the defaults, changed by overrides (e.g. ``{'d_dist': 0.1}``):
+    :class:`SettingsError` if they do not fit, before the bag is read where the defaults
+    already refuse them.
     """
+    if settings is None:
+        detector_settings({}, overrides or {})
     names = joint_names or JOINTS
     arm = iiwa_arm(with_orientation=orientation)
     result = ReplayResult(fmap=FailureMap(arm.task_space))
@@ -144,6 +166,8 @@ def replay(bag: str | Path, joint_states_topic: str = JOINT_STATES,
                  overrides or {})
         except BagError as err:
             raise ReplayError(f'{bag}: {err}', _finish(result)) from None
+        except SettingsError:
+            raise
         except Exception as err:
             raise ReplayError(f'{bag}: damaged bag after {len(result.times)} joint states '
                               f'({err})', _finish(result)) from None
@@ -163,7 +187,7 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
          names: list[str], arm, given: DetectorSettings | None, result: ReplayResult,
          t0: float, overrides: dict) -> None:
     # the detector the live planner ran (its status carries it), unless the caller chose one
-    settings = result.settings = given or replace(DetectorSettings(), **overrides)
+    settings = result.settings = given or detector_settings({}, overrides)
     states = StateCheck(names, arm.lower, arm.upper, arm.velocity_limits)
     measured = None
     measured_velocity = None
@@ -184,7 +208,7 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
             if given is None and isinstance(state.get('detection'), dict):
                 known = {f.name for f in fields(DetectorSettings)}
                 recorded = {k: v for k, v in state['detection'].items() if k in known}
-                settings = result.settings = DetectorSettings(**{**recorded, **overrides})
+                settings = result.settings = detector_settings(recorded, overrides)
             starting = state.get('state') == 'planning' and state.get('paths') == 0
             if starting and (previous is None or previous in FINISHED or previous == 'idle'):
                 result.runs += 1

@@ -122,6 +122,27 @@ def offline_run(scenario: str, method: Method, run: int, velocity_scaling: float
             'sim_time_s': summary['sim_time_s']}
 
 
+#: The value of a run setting (engine, velocity_scaling, offline, detection) in records
+#: written before it was kept (none: not compared).
+LEGACY_SETTINGS = {'offline': False, 'detection': {}}
+
+
+def check_settings(path: Path, records: list[dict], settings: dict) -> None:
+    """
+    Refuse a directory whose runs were made with other settings (ValueError, naming them).
+
+    A resumed experiment skips the runs it finds: runs of other settings would fill its
+    table, as the sweep's directories refuse episodes of another sweep.
+    """
+    for record in records:
+        theirs = {k: record.get(k, LEGACY_SETTINGS.get(k, settings[k])) for k in settings}
+        if theirs != settings:
+            differ = ', '.join(f'{k} {theirs[k]!r}, not {settings[k]!r}' for k in settings
+                               if theirs[k] != settings[k])
+            raise ValueError(f'{path} holds runs of another experiment ({differ}); use '
+                             'another --out')
+
+
 def run_robot_experiment(out: Path, scenarios: list[str], methods: list[Method], runs: int,
                          velocity_scaling: float = 1.0, timeout: float = 600.0,
                          progress: Callable[[str], None] | None = None,
@@ -136,38 +157,43 @@ def run_robot_experiment(out: Path, scenarios: list[str], methods: list[Method],
     ``offline`` runs each physics scene without the nodes (:func:`offline_run`);
     ``detection`` overrides detector thresholds (``DetectorSettings`` fields) either way.
     """
-    from probdis_ros.ros.demo import run_demo
-
     detection = dict(detection or {})
+    settings = {'engine': engine, 'velocity_scaling': velocity_scaling, 'offline': offline,
+                'detection': detection}
 
     out.mkdir(parents=True, exist_ok=True)
     path = out / RUNS_FILE
     records = read_episodes(path, repair=True)
+    check_settings(path, records, settings)
     # a run that was not valid is run again (its record stays, marked)
     done = {(r['scenario'], r['method'], r['run']) for r in records if valid(r)}
     todo = [(s, m, r) for s in scenarios for m in methods for r in range(runs)
             if (s, str(m), r) not in done]
     world_args = {'engine': engine, 'sim_time': sim_time,
                   'real_time_factor': real_time_factor}
+
+    def one_run(scenario: str, method: Method, run: int) -> dict:
+        """Run once, offline or through the nodes: a retry goes the same way."""
+        if offline:     # any method: no planner node, whose parameters limit it
+            return offline_run(scenario, method, run, velocity_scaling, detection)
+        from probdis_ros.ros.demo import run_demo
+
+        args = (*planner_arguments(method, run, velocity_scaling),
+                *detection_arguments(detection), '-p', f'bag_dir:={out / "bags"}')
+        return run_demo(scenario, timeout, quiet=True, extra_planner_args=args, **world_args)
+
     with path.open('a') as stream:
         for number, (scenario, method, run) in enumerate(todo, start=1):
             t0 = time.monotonic()
             try:
-                if offline:     # any method: no planner node, whose parameters limit it
-                    result = offline_run(scenario, method, run, velocity_scaling, detection)
-                else:
-                    args = (*planner_arguments(method, run, velocity_scaling),
-                            *detection_arguments(detection), '-p', f'bag_dir:={out / "bags"}')
-                    result = run_demo(scenario, timeout, quiet=True, extra_planner_args=args,
-                                      **world_args)
+                result = one_run(scenario, method, run)
             except (RuntimeError, TimeoutError) as err:
                 # the nodes did not come up or answer (DDS, a busy machine): the run did not
-                # happen; try it once more, then stop (a rerun resumes here)
+                # happen; try it once more, the same way, then stop (a rerun resumes here)
                 if progress:
                     progress(f'{scenario} {method} run {run}: {err}; trying again')
                 t0 = time.monotonic()
-                result = run_demo(scenario, timeout, quiet=True, extra_planner_args=args,
-                                  **world_args)
+                result = one_run(scenario, method, run)
             record = {'scenario': scenario, 'method': str(method), 'run': run, 'seed': run,
                       'engine': engine, 'velocity_scaling': velocity_scaling,
                       'success': result['success'], 'paths': result['paths'],
