@@ -485,6 +485,8 @@ def cmd_bench_physics(args: argparse.Namespace) -> int:
                'real_time_factor': measure.real_time_factor(args.scene, args.seconds),
                'free_tracking': [asdict(measure.free_tracking(v, args.scene))
                                  for v in (0.2, 1.0)],
+               'jtc_error_long_edge': {v: measure.jtc_error_on_long_edge(v)
+                                       for v in (0.2, 0.6, 0.8, 1.0)},
                'block': [asdict(measure.straight_block(args.scene, v)) for v in (0.2, 1.0)]}
     if args.json:
         _print_json(figures)
@@ -497,6 +499,9 @@ def cmd_bench_physics(args: argparse.Namespace) -> int:
         print(f'free motion at velocity scaling {t["velocity_scaling"]}: L1 gap peak '
               f'{t["peak_gap"]:.3f} rad, {t["final_gap"]:.3f} rad when judged {t["verdict"]} '
               f'{t["settle_s"]:.2f} s after the planned end')
+    errors = ', '.join(f'{e:.3f} rad at {v}' for v, e in figures['jtc_error_long_edge'].items())
+    print(f'JTC\'s error on a long free edge (what its path tolerance checks), one joint\'s '
+          f'peak by velocity scaling: {errors}')
     for b, v in zip(figures['block'], (0.2, 1.0)):
         contact = 'no contact' if b['contact_s'] is None else f'contact at {b["contact_s"]:.2f} s'
         detected = 'not detected' if b['detected_s'] is None else \
