@@ -500,7 +500,7 @@ def cmd_bench_physics(args: argparse.Namespace) -> int:
               f'{t["peak_gap"]:.3f} rad, {t["final_gap"]:.3f} rad when judged {t["verdict"]} '
               f'{t["settle_s"]:.2f} s after the planned end')
     errors = ', '.join(f'{e:.3f} rad at {v}' for v, e in figures['jtc_error_long_edge'].items())
-    print(f'JTC\'s error on a long free edge (what its path tolerance checks), one joint\'s '
+    print(f"JTC's error on a long free edge (what its path tolerance checks), one joint's "
           f'peak by velocity scaling: {errors}')
     for b, v in zip(figures['block'], (0.2, 1.0)):
         contact = 'no contact' if b['contact_s'] is None else f'contact at {b["contact_s"]:.2f} s'

@@ -198,7 +198,7 @@ class StateCheck:
                 f'quickest of its stream: stale (a backlog delivered late)')
         elif np.isfinite(self.quickest) and self.quickest - (now - stamp) > self.late:
             raise BadJointStateError(
-                f'stamped {self.quickest - (now - stamp):.3f} s ahead of its stream\'s time: '
+                f"stamped {self.quickest - (now - stamp):.3f} s ahead of its stream's time: "
                 f'a second publisher, or a clock that jumped?')
 
     def refuse(self, now: float, reason: str) -> None:

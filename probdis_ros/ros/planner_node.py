@@ -355,7 +355,7 @@ class PlannerNode(Node):
             if not isinstance(other, dict):
                 raise ValueError('not an object')
         except ValueError as err:       # someone else's message: not a reason to go
-            self.get_logger().warning(f'ignored a message on ~/instance that is not a planner\'s '
+            self.get_logger().warning(f"ignored a message on ~/instance that is not a planner's "
                                       f'announcement ({err})', throttle_duration_sec=10.0)
             return
         if other == self.instance:
