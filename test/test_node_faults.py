@@ -265,6 +265,42 @@ def test_a_full_disk_stops_the_recording_not_the_run(ros, tmp_path):
     wait_for(lambda: not ros.status.get('errors'), 5, 'the error cleared')
 
 
+class HungFile:
+    """A file whose every write and flush takes seconds (a network disk that hangs)."""
+
+    def __init__(self, real, seconds: float):
+        self.real, self.seconds = real, seconds
+
+    def write(self, data):
+        time.sleep(self.seconds)
+        return self.real.write(data)
+
+    def flush(self):
+        time.sleep(self.seconds)
+        self.real.flush()
+
+    def __getattr__(self, name):
+        return getattr(self.real, name)
+
+
+def test_a_hanging_disk_never_holds_the_supervision(ros, tmp_path):
+    # the bag was written in the executor's callbacks: a write that hangs held the joint
+    # states, the state timeout and every stop behind it
+    node = planner(ros, tmp_path, velocity_scaling=0.5)
+    mock(ros, free_scenario(tmp_path))
+    wait_for(lambda: ros.call('start').success, 20, 'start')
+    wait_for(lambda: ros.status.get('state') == 'executing', 20, 'motion')
+    storage = node.recorder.writer.storage
+    storage.bio = HungFile(storage.bio, 2.0)
+    node.recorder.flush()
+    time.sleep(0.1)
+    seen = node.measured_at
+    time.sleep(0.5)
+    assert node.measured_at > seen + 0.3, 'joint states waited for the disk'
+    assert ros.call('stop').success
+    wait_for(lambda: ros.status.get('state') == 'stopped', 2, 'the stop, at once')
+
+
 def test_reset_map_answers_failure_when_the_cleared_map_cannot_be_written(ros, tmp_path):
     fmap = FailureMap(ARM.task_space)
     fmap.add([0.5, 0, 0.4], [0, 0, 1], [1, 0, 0, 0])

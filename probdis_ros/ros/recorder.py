@@ -26,12 +26,18 @@ that ends at most that long before the kill (``probdis replay`` reads it up to t
 
 A write that fails (a full disk, a removed folder) never raises: the recording stops, the
 file is closed as far as it can be, and :attr:`error` says why.
+
+The file is written by a thread of the recorder's own: the node hands each message over and
+returns at once, so a disk that hangs (a network home directory) never holds the executor
+that supervises the arm; :meth:`close` waits for the writes at most ``CLOSE_WAIT``.
 """
 
 from __future__ import annotations
 
 from functools import cache
 from pathlib import Path
+import queue
+import threading
 import time
 
 from rosbags.rosbag2 import StoragePlugin, Writer
@@ -40,6 +46,8 @@ from rosbags.typesys.store import Typestore
 
 #: Longest time a written message stays in memory before it reaches the file [s].
 FLUSH_INTERVAL = 0.5
+#: Longest wait of :meth:`BagRecorder.close` for the writes handed over [s].
+CLOSE_WAIT = 5.0
 
 
 @cache
@@ -65,29 +73,69 @@ class BagRecorder:
         self.writer: Writer | None = Writer(self.path, version=9,
                                             storage_plugin=StoragePlugin.MCAP)
         self.writer.open()
-        self.connections = {}
-        self.count = 0
+        self.connections = {}           # the writer thread's: topic -> connection
+        self.topics: set[str] = set()   # the declared ones, known to the caller at once
+        self.count = 0                  # messages written
         self.error = ''
         self.flush_interval = flush_interval
         self.flushed_at = time.monotonic()
+        self.closed = False
+        self._work: queue.SimpleQueue = queue.SimpleQueue()
+        self._thread = threading.Thread(target=self._write_all, name='probdis_bag', daemon=True)
+        self._thread.start()
 
     def add_topic(self, topic: str, msgtype: str) -> None:
         """Declare a topic and its type (e.g. 'sensor_msgs/msg/JointState')."""
-        if topic not in self.connections and self.writer is not None:
-            self._guard(lambda: self.connections.__setitem__(topic, self.writer.add_connection(
-                topic, msgtype, typestore=self.typestore)))
+        if topic not in self.topics and not self.closed:
+            self.topics.add(topic)
+            self._work.put((self._add_connection, (topic, msgtype)))
 
     def write(self, topic: str, stamp_ns: int, data: bytes) -> None:
-        """Store one serialized message of a declared topic."""
-        if self.writer is not None and topic in self.connections:
-            if self._guard(lambda: self.writer.write(self.connections[topic], stamp_ns, data)):
-                self.count += 1
-                if time.monotonic() - self.flushed_at >= self.flush_interval:
-                    self.flush()
+        """Store one serialized message of a declared topic (handed to the writer thread)."""
+        if topic in self.topics and not self.closed and not self.error:
+            self._work.put((self._write, (topic, stamp_ns, data)))
+            if time.monotonic() - self.flushed_at >= self.flush_interval:
+                self.flush()
 
     def flush(self) -> None:
         """Hand everything written so far to the operating system (closes the MCAP chunk)."""
         self.flushed_at = time.monotonic()
+        if not self.closed:
+            self._work.put((self._flush, ()))
+
+    def close(self, wait: float = CLOSE_WAIT) -> None:
+        """Write the metadata and close the bag (idempotent; a failure lands in error)."""
+        if not self.closed:
+            self.closed = True
+            self._work.put((None, ()))
+        self._thread.join(wait)
+        if self._thread.is_alive() and not self.error:
+            self.error = (f'recording to {self.path} did not finish within {wait:.0f} s '
+                          f'(does the disk hang?)')
+
+    def _write_all(self) -> None:
+        """The writer thread: carry out what was handed over, in order, until close."""
+        while True:
+            action, args = self._work.get()
+            if action is None:
+                break
+            if self.writer is not None:
+                action(*args)
+        if self.writer is not None:
+            writer = self.writer
+            if self._guard(writer.close):
+                self.writer = None
+
+    def _add_connection(self, topic: str, msgtype: str) -> None:
+        self._guard(lambda: self.connections.__setitem__(topic, self.writer.add_connection(
+            topic, msgtype, typestore=self.typestore)))
+
+    def _write(self, topic: str, stamp_ns: int, data: bytes) -> None:
+        if topic in self.connections and \
+                self._guard(lambda: self.writer.write(self.connections[topic], stamp_ns, data)):
+            self.count += 1
+
+    def _flush(self) -> None:
         storage = getattr(self.writer, 'storage', None)
         chunk = getattr(storage, 'chunk', None)
         if storage is None or chunk is None:
@@ -98,13 +146,6 @@ class BagRecorder:
                 storage.close_chunk()
             storage.bio.flush()
         self._guard(flush)
-
-    def close(self) -> None:
-        """Write the metadata and close the bag (idempotent; a failure lands in error)."""
-        if self.writer is not None:
-            writer = self.writer
-            if self._guard(writer.close):
-                self.writer = None
 
     def _guard(self, action) -> bool:
         """Run a write; on failure stop recording, keep the reason, and return False."""
