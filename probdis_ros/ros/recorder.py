@@ -114,7 +114,7 @@ class BagRecorder:
                           f'(does the disk hang?)')
 
     def _write_all(self) -> None:
-        """The writer thread: carry out what was handed over, in order, until close."""
+        """Carry out what was handed over, in order, until close (the writer thread)."""
         while True:
             action, args = self._work.get()
             if action is None:
