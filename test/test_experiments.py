@@ -189,8 +189,13 @@ def test_success_within_n_paths_counts_only_successes_after_at_most_n_paths():
 def test_methods_parse_and_bad_ones_are_named():
     assert str(Method.parse('hard:0.01')) == 'hard:0.01'
     assert Method.parse('probabilistic') == Method('probabilistic')
+    # the string a method writes reads back to the same method (records are re-parsed)
+    for text in ('hard:0.0123456789', 'probabilistic:100', 'hard:0.01:250', 'epsilon:0.2'):
+        assert str(Method.parse(text)) == text
     for bad, message in (('hard', 'needs its parameter'), ('rrt', 'unknown method'),
-                         ('epsilon:x', 'not a number'), ('hard:2', 'outside')):
+                         ('epsilon:x', 'not a number'), ('hard:2', 'outside'),
+                         ('probabilistic::5', 'empty parameter'),
+                         ('probabilistic:inf', 'not finite'), ('hard:0.01:inf', 'not finite')):
         with pytest.raises(ValueError, match=message):
             Method.parse(bad)
     result = subprocess.run([*probdis_command(), 'experiment', 'sweep', '--methods', 'rrt',

@@ -475,3 +475,19 @@ def test_the_recorded_paper_settings_come_out_the_same_again(setting):
     for method in ('probabilistic', 'hard:0.01'):
         assert_recorded_episodes_rerun_alike(RECORDS['settings'], method,
                                              [(setting, 30, w) for w in range(3)])
+
+
+def test_idea_g_with_every_direction_tried_plans_without_probes():
+    # failures all around the start leave idea g no untried direction: the plan crashed
+    # reshaping an empty set of probes
+    for setting, method in (('3d-orient', 'informed:dg'), ('3d', 'informed:adfghij')):
+        arm = arm_for_setting(setting)
+        start = np.array([0.3, 0.5, 0.1, -1.2, 0.2, 0.6, 0.1])
+        pose = arm.fk(start)
+        fmap = FailureMap(arm.task_space)
+        q = None if pose.orientations is None else pose.orientations[0]
+        for d in even_directions(24, arm.task_space.dim):
+            fmap.add(pose.positions[0] + 0.1 * d, d, q)
+        planner = Method.parse(method).planner(arm, RRTSettings(iterations=10))
+        plan = planner.plan(start, np.zeros(7), fmap, np.random.default_rng(0))
+        assert plan is not None and np.array_equal(plan.path[0], start)

@@ -317,3 +317,16 @@ def test_a_block_met_while_turning_in_place_is_learned_with_a_direction():
     x, v, _ = failure_from_block(arm, config, step)
     ahead = arm.fk(config[None] + 1e-3 * step / 0.3).positions[0] - x
     assert np.dot(v, ahead) > 0
+
+
+def test_a_plan_from_the_goal_is_the_goal_alone_and_a_target_of_the_wrong_size_is_refused():
+    # Connect joins goal-tree leaves only: from the goal itself it returned a detour of ~2 rad
+    arm = arm_for_setting('3d-orient')
+    q = np.array([0.3, 0.5, 0.1, -1.2, 0.2, 0.6, 0.1])
+    plan = ProbRRT(arm, RRTSettings(iterations=10)).plan(q, q.copy(), FailureMap(
+        arm.task_space), np.random.default_rng(0))
+    assert plan.cost == 0.0 and np.array_equal(plan.path, q[None])
+    # the compiled kernels read a target by the arm's joint count, unchecked
+    coster = EdgeCoster(arm, FailureMap(arm.task_space))
+    with pytest.raises(ValueError, match='7 joint values, has 6'):
+        coster.costs(q[None], q[:6])

@@ -46,6 +46,8 @@ def _padded(values: np.ndarray, dim: int) -> np.ndarray:
 def _batch(arm: Arm, sources: np.ndarray, target: np.ndarray, base, limits):
     sources = np.ascontiguousarray(sources, dtype=float).reshape(-1, arm.n_joints)
     target = np.ascontiguousarray(target, dtype=float)
+    if target.shape != (arm.n_joints,):     # the kernels do not check: they would read past it
+        raise ValueError(f'target must have {arm.n_joints} joint values, has {target.size}')
     base = np.zeros(len(sources)) if base is None else \
         np.broadcast_to(np.asarray(base, dtype=float), len(sources))
     # fresh writable arrays: a read-only one is another type to numba, compiled again
@@ -122,7 +124,8 @@ class EdgeCoster:
         """
         Return (i, total) of the least ``base[i] + cost`` over the edges, exactly.
 
-        (-1, inf) when no edge is feasible.  Ties go to the lowest index, as with argmin.
+        (-1, inf) when no edge is feasible.  On equal totals a completed edge wins, then the
+        lowest index (:func:`cheapest_edge_kernel`).
         """
         sources, target, base, _ = _batch(self.arm, sources, target, base, None)
         index, total = cheapest_edge_kernel(sources, target, base, toward, self.delta,

@@ -474,7 +474,10 @@ def cheapest_edge_kernel(sources, target, base, toward, delta, length_weight, ri
     Best-first: each edge's cost so far (plus its length term, known up front) is a lower
     bound of its total, so the edge with the lowest bound is advanced by a chunk of points
     until one edge is complete with a total no other bound undercuts.  The result is exactly
-    the argmin (ties to the lowest index) while most edges are never costed to the end.
+    the least total while most edges are never costed to the end; on equal totals an edge
+    already complete wins over one that is not, then the lowest index (numpy's argmin takes
+    the lowest index alone: the Python loop and the planner's recorded episodes follow this
+    kernel).
     Edges run sources[i] -> target if toward, else target -> sources[i].
     """
     m, n_joints = sources.shape

@@ -27,6 +27,7 @@ for ``informed``: :mod:`probdis_ros.planning.informed`, whose ideas are letters,
 from __future__ import annotations
 
 from dataclasses import dataclass
+import math
 
 import numpy as np
 from probdis_ros.model.arms import Arm, TaskSpace
@@ -62,9 +63,15 @@ def _number(text: str, whole: str, low: float, high: float) -> float:
         number = float(text)
     except ValueError:
         raise ValueError(f'{whole!r}: {text!r} is not a number') from None
-    if not low < number <= high:
-        raise ValueError(f'{whole!r}: {text} is outside ({low:g}, {high:g}]')
+    if not (low < number <= high and math.isfinite(number)):
+        raise ValueError(f'{whole!r}: {text} is outside ({low:g}, {high:g}] or not finite')
     return number
+
+
+def _text(number: float) -> str:
+    """Return a parameter as the method string writes it: short, and read back exactly."""
+    text = repr(float(number))
+    return text[:-2] if text.endswith('.0') else text
 
 
 @dataclass(frozen=True)
@@ -90,6 +97,8 @@ class Method:
         if not value:
             if name != 'probabilistic':
                 raise ValueError(f'{name} needs its parameter, e.g. {name}:0.01')
+            if rest:
+                raise ValueError(f'{text!r}: an empty parameter ({_USAGE})')
             return cls(name)
         if c_hard and name != 'hard':
             raise ValueError(f'{text!r}: only hard takes a second parameter ({_USAGE})')
@@ -141,8 +150,8 @@ class Method:
             return self.name if self.ideas is None else f'{self.name}:{self.ideas}'
         if self.value is None:
             return self.name
-        text = f'{self.name}:{self.value:g}'
-        return text if self.c_hard is None else f'{text}:{self.c_hard:g}'
+        text = f'{self.name}:{_text(self.value)}'
+        return text if self.c_hard is None else f'{text}:{_text(self.c_hard)}'
 
     def map_c_fail(self, default: float = DEFAULT_C_FAIL) -> float:
         """Return the C_FAIL of the failure map the loop learns with this method."""

@@ -192,6 +192,8 @@ def probe_chains(arm: Arm, start: np.ndarray, directions: np.ndarray,
     lower = arm.lower if lower is None else lower
     upper = arm.upper if upper is None else upper
     n = len(directions)
+    if n == 0:              # idea g may leave no direction untried: no probe, no crash
+        return []
     joints = arm.n_joints
     x0 = arm.positions(start)[0]
     q = np.tile(start, (n, 1))
