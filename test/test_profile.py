@@ -218,6 +218,23 @@ def test_a_stop_heading_into_a_limit_brakes_harder_and_stays_inside():
     assert clipped.overload == np.inf and clipped.positions[:, 0].max() <= limits.upper[0]
 
 
+@pytest.mark.parametrize('gap', [0.002, 0.005])
+def test_a_stop_that_cannot_brake_before_a_limit_holds_there_as_jtc_runs_it(gap):
+    # positions clipped at the limit with the profile's speeds left on: JTC's quintic ran
+    # 4e-4 rad past the limit between the points, at 160 rad/s^2
+    limits = MotionLimits(velocity_scaling=0.2)
+    v = np.zeros(N)
+    v[0] = limits.max_velocity[0]
+    q = np.array([0.0, 0.5, 0.0, -1.0, 0.0, 0.5, 0.0])
+    q[0] = limits.upper[0] - gap
+    motion = stop(q, v, np.zeros(N), limits)
+    assert motion.overload == np.inf
+    trajectory = JtcTrajectory(motion.command, q, v)
+    past = max(trajectory.sample(t)[0][0] - limits.upper[0]
+               for t in np.arange(0.0, trajectory.duration + 0.02, 1e-4))
+    assert past <= 1e-12
+
+
 # ---------------------------------------------------------------- the property test
 
 

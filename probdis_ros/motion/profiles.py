@@ -340,7 +340,9 @@ def stop(q: np.ndarray, v: np.ndarray, a: np.ndarray, limits: MotionLimits | Non
     the least factor on the acceleration and jerk limits (``overload``, found by bisection)
     that keeps it inside (or, for a joint already outside, no further out), up to
     MAX_STOP_OVERLOAD x the unscaled limits; if even that overshoots, the positions are
-    clipped at the limit and ``overload`` is inf.  At rest the motion is empty and its
+    clipped at the limit, the joint holds there (at rest) from its first sample past it, and
+    ``overload`` is inf (only an arm already within the joint margin of a limit, moving
+    toward it, gets there).  At rest the motion is empty and its
     command a one-point hold at q.
 
     Velocities: a stop cannot undo the speed its state's acceleration still adds (a² / 2 jerk);
@@ -419,6 +421,14 @@ def stop(q: np.ndarray, v: np.ndarray, a: np.ndarray, limits: MotionLimits | Non
         positions, velocities, accelerations = q + s[:, :1] * u, s[:, 1:2] * u, s[:, 2:3] * u
     positions[0], velocities[0], accelerations[0] = q, v, a
     velocities[-1] = accelerations[-1] = 0.0
+    if overload == np.inf:
+        # a joint that cannot stop before its limit holds there from the first sample past
+        # it: clipped positions with the profile's speeds left on would run JTC's quintic
+        # past the limit between samples
+        past = np.maximum.accumulate((positions < lower) | (positions > upper), axis=0)
+        past[0] = False
+        velocities[past] = 0.0
+        accelerations[past] = 0.0
     positions = np.clip(positions, lower, upper)   # by ROUNDING unless overload is inf
     return Motion(times, positions, velocities, accelerations,
                   np.array([0.0, times[-1]]), overload, period)
