@@ -174,6 +174,30 @@ def test_a_joint_state_the_arm_cannot_have_stops_the_run_and_refuses_start(
     wait_for(lambda: ros.call('start').success, 10, 'a start once the refusal is old')
 
 
+def test_a_backlog_of_joint_states_delivered_late_stops_the_run(ros, tmp_path):
+    # the staleness check was tested on StateCheck alone: the node could have dropped it
+    node = planner(ros, tmp_path, state_timeout=0.3)
+    stream = Stream(ros)
+    wait_for(lambda: ros.call('start').success, 10, 'start')
+    count = len(ros.trajectories)
+    stream.cancel()
+    began = ros.probe.get_clock().now().nanoseconds * 1e-9
+
+    def late():         # stamps that fall behind the clock: a queue drained too slowly
+        now = ros.probe.get_clock().now().nanoseconds * 1e-9
+        stamp = began + 0.2 * (now - began)
+        ros.js_pub.publish(stream.message(stamp=Time(sec=int(stamp),
+                                                     nanosec=int((stamp % 1) * 1e9))))
+    ros.probe.create_timer(0.01, late)
+    wait_for(lambda: finished(ros), 5, 'the run to stop')
+    assert ros.status['state'] == 'stopped' and 'stale' in ros.status['message'], ros.status
+    assert node.state_check.refused >= 1 and len(ros.trajectories) > count, 'no stop was sent'
+    # (from where the running command has taken the arm: the stale states are not used)
+    stop = ros.trajectories[-1][1]
+    assert np.allclose(stop.points[-1].velocities, 0.0)
+    assert all(ARM.within_limits(np.array(p.positions))[0] for p in stop.points)
+
+
 def test_joint_states_outside_the_limits_are_never_taken_and_start_is_refused(ros, tmp_path):
     node = planner(ros, tmp_path)
     Stream(ros, outside(0, 3.0))
@@ -748,7 +772,7 @@ def test_on_simulated_time_start_needs_a_running_clock_and_a_run_stops_with_it(r
                                                nanosec=int((sim[0] - seconds) * 1e9))))
     ros.probe.create_timer(0.01, advance)
     wait_for(lambda: ros.call('start').success, 10, 'a start on a running clock')
-    assert ros.status.get('state') in ('planning', 'executing') or not finished(ros)
+    wait_for(lambda: ros.status.get('state') in ('planning', 'executing'), 5, 'the run')
     # the simulation pauses: the state timeout (simulated) cannot fire, the stalled clock
     # stops the run after CLOCK_STALL of wall time
     running[0] = False

@@ -36,7 +36,7 @@ def test_an_offline_physics_episode_learns_from_a_block_and_is_reproducible():
     # the hook pressed on the bar: a force, and a gap the detector saw
     assert first.contact_force.max() > 10.0 and first.gaps.max() > 0.04
     np.testing.assert_array_equal(first.configs, again.configs)
-    assert first.sim_time_s > 1.0 and first.summary()['real_time_factor'] > 1.0
+    assert first.sim_time_s > 1.0      # (its speed: `probdis bench physics`, not a test)
 
 
 def test_probdis_sim_engine_physics_prints_json_and_draws_the_scene(tmp_path):

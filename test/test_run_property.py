@@ -36,7 +36,7 @@ from probdis_ros.motion.jtc import JtcTrajectory
 from probdis_ros.motion.profiles import MAX_STOP_OVERLOAD
 from probdis_ros.motion.state_check import BadJointStateError, StateCheck
 from probdis_ros.planning.disentangle import Disentangler
-from probdis_ros.run import Learned, PlanFrom, Run, RunSettings, Send
+from probdis_ros.run import Learned, PlanFrom, Run, RunSettings, Send, StatusChanged
 import pytest
 
 ARM = iiwa_arm()
@@ -55,7 +55,7 @@ class Path:
 
 
 class StubPlanner:
-    """Random paths of 1-3 edges inside the limits (or none), instantly."""
+    """Random paths of 1-3 edges inside the limits (or none, or now and then one past a limit)."""
 
     def __init__(self, rng: np.random.Generator) -> None:
         self.rng = rng
@@ -65,8 +65,10 @@ class StubPlanner:
         if self.rng.random() < 0.05:
             return None
         middle = [start + self.rng.uniform(-0.4, 0.4, 7) for _ in range(self.rng.integers(0, 3))]
-        path = np.array([start, *middle, goal])
-        return Path(np.clip(path, ARM.lower + 0.01, ARM.upper - 0.01))
+        path = np.clip(np.array([start, *middle, goal]), ARM.lower + 0.01, ARM.upper - 0.01)
+        if self.rng.random() < 0.05:        # a planner bug: a via point past a limit
+            path = np.vstack([path[:1], ARM.upper + 0.05, path[1:]])
+        return Path(path)
 
 
 class World:
@@ -130,18 +132,27 @@ def drive(seed: int, steps: int = 1500) -> dict:
     world = World(start, limits.max_acceleration)
     gate = StateCheck(NAMES, ARM.lower, ARM.upper, ARM.velocity_limits)
     counts = {'commands': 0, 'refused': 0, 'learned': 0, 'starts': 0, 'stops': 0,
-              'outcomes': set()}
+              'ends_stopped': 0, 'paths_refused': 0, 'outcomes': set()}
     run: Run | None = None
     pending: list[tuple[float, Run, PlanFrom]] = []
     silent_until = -1.0
     measured_at, measured, velocity = -np.inf, None, None
 
     def act(run: Run, t: float) -> None:
+        sent = False
         while run.actions:
             action = run.actions.pop(0)
             if isinstance(action, Send):
+                sent = True
                 counts['commands'] += 1
                 check_command(world.take(action.command, t), limits)
+            elif isinstance(action, StatusChanged) and not run.active and \
+                    run.outcome != 'succeeded':
+                # every end but the goal (a timeout, a refused state, a planner error, a
+                # stop) commands the arm to rest in the same round
+                assert sent, f'the run ended ({run.outcome}: {run.message}) without a stop'
+                counts['ends_stopped'] += 1
+                counts['paths_refused'] += 'leaves the joint limits' in run.message
             elif isinstance(action, PlanFrom):
                 pending.append((t + rng.uniform(0.0, 0.3), run, action))
             elif isinstance(action, Learned):
@@ -206,14 +217,19 @@ def drive(seed: int, steps: int = 1500) -> dict:
         if rng.random() < 0.01 and (run is None or not run.active) and \
                 t - measured_at <= settings.state_timeout and \
                 not gate.refused_within(t, 0.1):
+            running = None
             if run is not None:
                 counts['outcomes'].add(run.outcome)
+                # as the node does: the last command, while the arm may still run it
+                last = run.trajectory
+                if last is not None and t <= last.taken_at + last.duration + 0.5:
+                    running = last
             goal = np.clip(measured + rng.uniform(-0.5, 0.5, 7), ARM.lower, ARM.upper)
             loop = Disentangler(ARM, StubPlanner(rng), goal, max_paths=8, seed=seed,
                                 goal_tolerance=0.04)
             run = Run(ARM, loop, settings, clock=lambda: clock[0])
             counts['starts'] += 1
-            run.start(measured_at, measured, velocity)
+            run.start(measured_at, measured, velocity, running)
             act(run, t)
     return counts
 
@@ -231,6 +247,7 @@ def test_the_interleavings_reach_every_kind_of_event():
             totals[key] = totals.get(key, 0) + value if key != 'outcomes' else \
                 totals.get(key, set()) | value
     assert totals['learned'] and totals['stops'] and totals['refused'] > 10
+    assert totals['ends_stopped'] > 10 and totals['paths_refused']
     assert {'stopped', 'succeeded'} <= totals['outcomes']
 
 
