@@ -62,6 +62,7 @@ def _nodes(context, *args, **kwargs):
              remappings=[('joint_states', '/lbr/joint_states')]),
         Node(package='rviz2', executable='rviz2', name='rviz2',
              arguments=['-d', str(share / 'config' / 'rviz' / 'probdis.rviz')],
+             parameters=[{'use_sim_time': sim}],      # on the mock's clock, as TF is
              condition=IfCondition(LaunchConfiguration('rviz'))),
     ]
 
