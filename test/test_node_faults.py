@@ -277,9 +277,10 @@ def test_a_full_disk_stops_the_recording_not_the_run(ros, tmp_path):
     wait_for(lambda: ros.call('start').success, 20, 'start')
     wait_for(lambda: ros.status.get('state') == 'executing', 20, 'motion')
     storage = node.recorder.writer.storage
+    # (the real file stays open: the recorder's thread may be writing to it right now)
     storage.bio, real = open('/dev/full', 'wb'), storage.bio
-    real.close()
     wait_for(lambda: ros.status.get('errors'), 5, 'the error in the status')
+    real.close()
     assert 'No space left on device' in ros.status['errors'][0]
     assert 'the run goes on unrecorded' in ros.status['errors'][0]
     wait_for(lambda: any(d.level == DiagnosticStatus.ERROR and 'No space' in d.message
