@@ -198,8 +198,9 @@ class ProbRRT:
              rng: np.random.Generator) -> Plan | None:
         """Return the least-cost path from start to goal found, or None if none is feasible."""
         t0 = time.perf_counter()
-        if np.array_equal(self._checked(start, 'start'), self._checked(goal, 'goal')):
-            return Plan(self._checked(start, 'start')[None], 0.0)    # there already: no detour
+        here = self._checked(start, 'start')
+        if np.array_equal(here, self._checked(goal, 'goal')):
+            return Plan(here[None], 0.0)        # there already: no detour
         coster = self.objective.coster(self.arm, fmap, self.settings.delta, self.coster_type)
         trees = self.grow(start, goal, coster, rng, t0)
         plan = self._connect(trees[0], trees[1], coster)
