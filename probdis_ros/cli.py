@@ -534,8 +534,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
                          'informed')
     fmap = FailureMap.load(args.map)
     # probabilistic:C_FAIL plans with its C_FAIL, as sim does (not the one the map was saved with)
-    fmap = FailureMap.from_dict({**fmap.to_dict(), 'c_fail': method.map_c_fail(fmap.c_fail)},
-                                args.map)
+    fmap.c_fail = method.map_c_fail(fmap.c_fail)
     setting = {'point2': '2d', 'point3': '3d', 'pose3': '3d-orient'}[fmap.task_space.value]
     arm = arm_for_setting(setting)
     ends = []

@@ -31,12 +31,12 @@ from __future__ import annotations
 
 from collections import defaultdict
 import json
-import os
 from pathlib import Path
 import statistics
 
 import numpy as np
 from probdis_ros.experiments.sweep import EPISODES_FILE, read_episodes
+from probdis_ros.model.failure_map import write_atomically
 
 BOOTSTRAP_SAMPLES = 2000
 BOOTSTRAP_SEED = 0
@@ -285,24 +285,6 @@ def check_records(records: list, source: str | Path) -> list[dict]:
     return records
 
 
-def _write_atomically(path: Path, text: str) -> None:
-    """
-    Write a text file as the failure maps are written: temporary file, fsync, rename.
-
-    A report killed midway leaves the previous summary or the new one, never half of one.
-    """
-    tmp = path.with_name(f'.{path.name}.{os.getpid()}.tmp')
-    try:
-        with tmp.open('x') as out:
-            out.write(text)
-            out.flush()
-            os.fsync(out.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-
-
 def write_report(directory: str | Path) -> dict:
     """
     Read DIR/episodes.jsonl; write the figures, summary.json and summary.md into DIR.
@@ -331,6 +313,8 @@ def write_report(directory: str | Path) -> dict:
         plot_family_curves(summary, directory / 'families.png')
         files.append('families.png')
     summary['files'] = [*files, 'summary.json', 'summary.md']
-    _write_atomically(directory / 'summary.json', json.dumps(summary, indent=1) + '\n')
-    _write_atomically(directory / 'summary.md', '\n'.join(text))
+    # (a report killed midway leaves the previous summary or the new one, never half)
+    write_atomically(directory / 'summary.json', json.dumps(summary, indent=1) + '\n',
+                     private=False)
+    write_atomically(directory / 'summary.md', '\n'.join(text), private=False)
     return summary

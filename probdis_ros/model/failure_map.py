@@ -59,18 +59,32 @@ class FailureMapError(ValueError):
 
 def write_document(path: str | Path, doc: dict) -> None:
     """Write a map document atomically (temporary file, fsync, rename)."""
+    write_atomically(path, json.dumps(doc, indent=1) + '\n')
+
+
+def write_atomically(path: str | Path, text: str, private: bool = True) -> None:
+    """
+    Write a text file so that a crash leaves the old file or the new one, never half.
+
+    A temporary file beside it, fsync, rename.  ``private``: readable by its owner alone
+    (the map files); else with the permissions of any new file (the umask's).
+    """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f'.{path.name}.', suffix='.tmp', dir=path.parent)
+    if private:
+        fd, name = tempfile.mkstemp(prefix=f'.{path.name}.', suffix='.tmp', dir=path.parent)
+        tmp, out = Path(name), os.fdopen(fd, 'w')
+    else:
+        tmp = path.with_name(f'.{path.name}.{os.getpid()}.tmp')
+        out = tmp.open('x')
     try:
-        with os.fdopen(fd, 'w') as out:
-            json.dump(doc, out, indent=1)
-            out.write('\n')
+        with out:
+            out.write(text)
             out.flush()
             os.fsync(out.fileno())
         os.replace(tmp, path)
     except BaseException:
-        Path(tmp).unlink(missing_ok=True)
+        tmp.unlink(missing_ok=True)
         raise
 
 
