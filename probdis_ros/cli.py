@@ -295,6 +295,7 @@ def _robot_worlds(args: argparse.Namespace) -> tuple[list[str], dict[str, list[s
 def cmd_experiment_robot(args: argparse.Namespace) -> int:
     """Run the robot scenarios through the ROS nodes against the mock iiwa (Table I)."""
     from probdis_ros.ros.robot_experiment import robot_table, run_robot_experiment
+    from probdis_ros.run import MAX_VELOCITY_SCALING
 
     scenarios, groups = _robot_worlds(args)
     physics = args.engine == 'physics'
@@ -303,8 +304,9 @@ def cmd_experiment_robot(args: argparse.Namespace) -> int:
     _not_negative(args.real_time_factor, '--real-time-factor')
     _check_output(args.out, '--out', folder=True)
     runs = args.runs if args.runs is not None else (10 if groups is None else 1)
-    if runs < 1 or not 0 < args.velocity_scaling <= 1:
-        raise UsageError('--runs must be positive and --velocity-scaling in (0, 1]')
+    if runs < 1 or not 0 < args.velocity_scaling <= MAX_VELOCITY_SCALING:
+        raise UsageError(f'--runs must be positive and --velocity-scaling in '
+                         f'(0, {MAX_VELOCITY_SCALING}]')
     if args.offline and not physics:
         raise UsageError('--offline runs the physics scenes (--engine physics)')
     detection = _detection_overrides(args.detection)
@@ -479,15 +481,17 @@ def cmd_bench_physics(args: argparse.Namespace) -> int:
 
     from probdis_ros.bench import machine
     from probdis_ros.physics import measure
+    from probdis_ros.run import MAX_VELOCITY_SCALING
 
     _positive(args.seconds, '--seconds')
+    fastest = MAX_VELOCITY_SCALING
     figures = {'machine': machine(),
                'real_time_factor': measure.real_time_factor(args.scene, args.seconds),
                'free_tracking': [asdict(measure.free_tracking(v, args.scene))
-                                 for v in (0.2, 1.0)],
-               'jtc_error_long_edge': {v: measure.jtc_error_on_long_edge(v)
-                                       for v in (0.2, 0.6, 0.8, 1.0)},
-               'block': [asdict(measure.straight_block(args.scene, v)) for v in (0.2, 1.0)]}
+                                 for v in (0.2, fastest)],
+               'long_edge': {v: asdict(measure.long_edge(v)) for v in (0.2, 0.6, 0.7, 1.0)},
+               'block': [asdict(measure.straight_block(args.scene, v))
+                         for v in (0.2, fastest)]}
     if args.json:
         _print_json(figures)
         return 0
@@ -499,10 +503,14 @@ def cmd_bench_physics(args: argparse.Namespace) -> int:
         print(f'free motion at velocity scaling {t["velocity_scaling"]}: L1 gap peak '
               f'{t["peak_gap"]:.3f} rad, {t["final_gap"]:.3f} rad when judged {t["verdict"]} '
               f'{t["settle_s"]:.2f} s after the planned end')
-    errors = ', '.join(f'{e:.3f} rad at {v}' for v, e in figures['jtc_error_long_edge'].items())
+    edges = figures['long_edge'].items()
+    errors = ', '.join(f'{e["jtc_error"]:.3f} rad at {v}' for v, e in edges)
     print(f"JTC's error on a long free edge (what its path tolerance checks), one joint's "
           f'peak by velocity scaling: {errors}')
-    for b, v in zip(figures['block'], (0.2, 1.0)):
+    speeds = ', '.join(f'{e["speed_over_limit"]:.2f} at {v}' for v, e in edges)
+    print(f"the same edge's fastest measured joint speed over its URDF limit (the driver's "
+          f'command guard stops at 1; the planner takes at most {fastest}): {speeds}')
+    for b, v in zip(figures['block'], (0.2, fastest)):
         contact = 'no contact' if b['contact_s'] is None else f'contact at {b["contact_s"]:.2f} s'
         detected = 'not detected' if b['detected_s'] is None else \
             f'detected at {b["detected_s"]:.2f} s'
@@ -968,7 +976,7 @@ def build_parser() -> argparse.ArgumentParser:
     robot.add_argument('--out', default='results/robot', help='directory of robot_runs.jsonl '
                        'and the bags; runs already there are skipped')
     robot.add_argument('--velocity-scaling', type=float, default=0.2,
-                       help='of the planner (0.2, its default on the real arm)')
+                       help='of the planner (0.2, its default on the real arm; at most 0.7)')
     robot.add_argument('--timeout', type=float, default=600.0, help='seconds per run')
     robot.add_argument('--offline', action='store_true',
                        help="run the physics scenes without the nodes (the planner node's "

@@ -39,7 +39,7 @@ from probdis_ros.motion.jtc import JtcTrajectory
 from probdis_ros.motion.profiles import from_state
 from probdis_ros.motion.state_check import BadJointStateError, StateCheck
 from probdis_ros.planning.disentangle import Disentangler
-from probdis_ros.run import Learned, Run, RunSettings, Send
+from probdis_ros.run import Learned, MAX_VELOCITY_SCALING, Run, RunSettings, Send
 import pytest
 
 ARM = iiwa_arm()
@@ -356,3 +356,11 @@ def test_a_stop_from_an_impossible_measured_velocity_stays_within_the_arms_range
     assert np.all(np.isfinite(command.positions)) and ARM.within_limits(command.positions).all()
     assert np.abs(command.velocities).max() <= 1.5 * ARM.velocity_limits.max()
     assert np.allclose(command.velocities[-1], 0.0)
+
+
+def test_a_run_refuses_a_velocity_scaling_at_which_the_arm_overshoots_its_limits():
+    # the arm in joint impedance overshoots its commanded speed by up to 27 %, and the
+    # driver's command guard stops at the URDF's limit (test_simulated_robot.py)
+    assert RunSettings(velocity_scaling=MAX_VELOCITY_SCALING).velocity_scaling == 0.7
+    with pytest.raises(ValueError, match='velocity_scaling must be in'):
+        RunSettings(velocity_scaling=0.8)

@@ -467,6 +467,7 @@ def planner_process(ros, tmp_path, *params, stderr=None):
 @pytest.mark.parametrize('param, name', [
     ('goal:=[1, 2, 3]', 'goal'),
     ('velocity_scaling:=0.0', 'velocity_scaling'),
+    ('velocity_scaling:=0.9', 'velocity_scaling'),    # the arm would overshoot its limits
     ('max_paths:=0', 'max_paths'),
     ('d_dist:=0.35', 'd_dist'),           # in its own range, but not below gap_ceiling
 ])

@@ -196,7 +196,7 @@ def test_replay_of_a_recorded_mock_run_finds_the_live_blocks(tmp_path):
             Parameter('goal', value=WORLD.goal.tolist()),
             Parameter('map_file', value=str(tmp_path / 'map.json')),
             Parameter('bag_dir', value=str(tmp_path / 'bags')),
-            Parameter('velocity_scaling', value=1.0), Parameter('state_timeout', value=2.0),
+            Parameter('velocity_scaling', value=0.7), Parameter('state_timeout', value=2.0),
             Parameter('max_paths', value=6),
             # the kinematic arm lags its command by the driver's filter alone (0.04 s)
             Parameter('motion_delay', value=0.04)]))

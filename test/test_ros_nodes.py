@@ -26,14 +26,17 @@ import time
 
 import numpy as np
 from probdis_ros.model import FailureMap, iiwa_arm
+from probdis_ros.motion.jtc import TrajectoryCommand
 from probdis_ros.physics import load_scene
 from probdis_ros.resources import scenario_path
+from probdis_ros.ros.messages import trajectory_msg
 from probdis_ros.ros.mock_iiwa_node import MockIiwa
 from probdis_ros.ros.planner_node import PlannerNode
 from probdis_ros.sim.worlds import load_world
 import pytest
 from rclpy.parameter import Parameter
 from ros_harness import JOINTS, RosTest, wait_for
+from trajectory_msgs.msg import JointTrajectory
 
 pytestmark = pytest.mark.ros
 WORLD = load_world(scenario_path('demo_iiwa'))
@@ -50,7 +53,7 @@ def ros():
 
 def planner(ros, tmp_path, **params):
     """Start a planner node in-process (fast motions; nodes share one interpreter)."""
-    params = {'velocity_scaling': 1.0, 'state_timeout': 2.0, 'bag_dir': str(tmp_path / 'bags'),
+    params = {'velocity_scaling': 0.7, 'state_timeout': 2.0, 'bag_dir': str(tmp_path / 'bags'),
               **params}
     goal = np.asarray(params.pop('goal', GOAL))
     overrides = [Parameter('goal', value=goal.tolist()),
@@ -215,6 +218,22 @@ def test_joint_states_that_stop_arriving_stop_the_run(ros, tmp_path):
     wait_for(lambda: finished(ros), 5, 'run to stop')
     assert ros.status['state'] == 'stopped'
     assert 'stopped arriving' in ros.status['message']
+
+
+def test_the_mock_runs_a_trajectory_stamped_on_its_own_clock(ros, tmp_path):
+    # JTC counts a stamped trajectory's times from its stamp; the mock's arm time starts at
+    # 0 while its clock reads the wall clock's date, so a stamp of "now" waited 56 years
+    arm = mock(ros, free_scenario(tmp_path))
+    start = arm.q.copy()
+    goal = start.copy()
+    goal[0] += 0.3
+    msg = trajectory_msg(TrajectoryCommand(np.array([1.0]), goal[None]), list(JOINTS))
+    msg.header.stamp = arm.get_clock().now().to_msg()
+    publisher = ros.probe.create_publisher(
+        JointTrajectory, '/lbr/joint_trajectory_controller/joint_trajectory', 10)
+    wait_for(lambda: publisher.get_subscription_count() > 0, 10, 'the mock')
+    publisher.publish(msg)
+    wait_for(lambda: abs(arm.q[0] - goal[0]) < 0.01, 10, 'the arm at the goal')
 
 
 def test_a_full_run_against_the_physics_mock_learns_and_persists_failures(ros, tmp_path):

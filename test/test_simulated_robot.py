@@ -15,19 +15,21 @@
 
 """The simulated robot: JTC, the driver's filter, an engine, and what the driver reports."""
 
+from dataclasses import replace
+
 import numpy as np
 from probdis_ros.model import iiwa_arm
-from probdis_ros.motion.jtc import JtcTrajectory
+from probdis_ros.motion.jtc import DRIVER_FILTER_TAU, FirstOrderFilter, JtcTrajectory
 from probdis_ros.motion.timing import time_path
-from probdis_ros.physics import load_scene
+from probdis_ros.physics import load_scene, measure
 from probdis_ros.physics.simulated_robot import build_robot, RobotSettings
+from probdis_ros.run import MAX_VELOCITY_SCALING
 import pytest
 
 ARM = iiwa_arm()
 
 
 def free_scene():
-    from dataclasses import replace
     return replace(load_scene('demo_hook'), obstacles=())
 
 
@@ -70,7 +72,29 @@ def test_the_physics_arm_lags_and_an_echoing_driver_hides_it():
     # a measuring driver shows the impedance lag; an echoing one shows none while the arm
     # itself is elsewhere
     assert gaps[False][0] > 0.02 and gaps[False][1] == 0.0
-    assert gaps[True][0] < 1e-9 and gaps[True][1] > 0.02
+    assert gaps[True][1] > 0.02
+
+
+def test_an_echoing_driver_reports_the_command_it_sends_after_its_filter():
+    # the lbr stack's set_state_open_loop: the position is the driver's filtered command,
+    # the velocity its difference, the torques stay measured
+    goal = np.array([0.5, 0.3, 0.2, -1.0, 0.1, 0.7, 0.2])
+    robot, _ = build_robot('physics', free_scene(), RobotSettings(echo=True))
+    jtc, duration = command_to(robot, goal, 0.5)
+    sent = FirstOrderFilter(DRIVER_FILTER_TAU)
+    sent.reset(robot.joint_state().position)
+    before = sent.value.copy()
+    while robot.time < duration:
+        command = jtc.at(robot.time + robot.settings.period - jtc.taken_at)
+        robot.step()
+        expected = sent(command)
+        reported = robot.joint_state()
+        assert np.abs(reported.position - expected).max() < 1e-12
+        assert np.abs(reported.velocity - (expected - before) / robot.settings.period
+                      ).max() < 1e-9
+        assert np.array_equal(reported.effort, robot.engine.tau_measured)
+        before = expected
+    assert np.abs(reported.position - robot.engine.q).sum() > 0.02   # the arm lags
 
 
 def test_latency_delays_and_noise_perturbs_the_reported_state_reproducibly():
@@ -97,3 +121,36 @@ def test_an_unknown_engine_is_refused():
         build_robot('teleport', 'demo_iiwa')
     with pytest.raises(ValueError, match='latency'):
         RobotSettings(latency=-1.0)
+
+
+def test_the_command_guard_stops_the_driver_on_a_speed_the_arm_may_not_reach():
+    # the lbr stack's guard: a measured joint speed above the URDF limit ends the driver;
+    # the arm in joint impedance overshoots its commanded speed as it catches up, so the
+    # long edge at the full velocity limits trips it (the planner takes at most 0.8)
+    start, goal = measure.LONG_EDGE
+    free = replace(load_scene('demo_hook'), obstacles=(), start=start, goal=goal)
+    robot, _ = build_robot('physics', free)
+    motion = measure._motion(np.array([start, goal]), 1.0)
+    robot.command(motion.command)
+    while robot.stopped is None and robot.time < motion.duration:
+        robot.step()
+    assert robot.stopped is not None and 'above its velocity limit' in robot.stopped
+    # a stopped driver reports nothing more, and the arm holds
+    last, held = robot.joint_state(), robot.engine.q.copy()
+    for _ in range(50):
+        robot.step()
+    assert robot.joint_state() is last and robot.time > last.time + 0.4
+    assert np.abs(robot.engine.q - held).max() < 0.05
+    for scaling in (0.2, MAX_VELOCITY_SCALING):
+        assert measure.long_edge(scaling).speed_over_limit < 0.95
+
+
+def test_the_command_guard_stops_the_driver_on_a_command_past_a_limit():
+    robot, _ = build_robot('kinematic', 'demo_iiwa')
+    beyond = robot.joint_state().position.copy()
+    beyond[0] = ARM.upper[0] + 0.05
+    _, duration = command_to(robot, beyond, 0.5)
+    while robot.stopped is None and robot.time < duration + 1.0:
+        robot.step()
+        assert robot.engine.q[0] <= ARM.upper[0]
+    assert robot.stopped is not None and 'A1 outside its limits' in robot.stopped

@@ -30,9 +30,14 @@ joint impedance follows its command with a lag) with where it is.  The L1 gap
   model is given, when the external-torque estimate ``effort - g(q)`` exceeds
   ``torque_ceiling`` at a joint (0: off; it needs the load data right, as KUKA's does);
 * **done** when the trajectory has ended and the gap to its last point is at most ``d_dist``;
-* **echo** when the measured positions have followed the moving command with no lag at all
-  for ``echo_time`` seconds: no arm in joint impedance does that, a driver that reports the
-  commanded position (the lbr stack's ``open_loop``) does, and it would hide every block;
+* **echo** when the measured positions have followed the moving command as the driver
+  sends it for ``echo_time`` seconds: a driver that reports the position it commands (the
+  lbr stack's ``open_loop``) does, and it would hide every block.  It reports the command
+  after its filter (:class:`~probdis_ros.motion.jtc.FirstOrderFilter`), which lags the
+  path by tens of milliseconds, so each state is held against the command passed through
+  the driver's filter (``driver_tau``) and against the command itself, a few controller
+  periods either way, while the joints A1-A4 move (:data:`ECHO_JOINTS`): in joint impedance
+  they lag the command by tens of milliseconds;
 * **not executed**, where the caller expects the arm to move (``expect_motion``: a path from
   a free arm), when a gap-based block is seen, ``START_WAIT`` has passed (or the gap exceeds
   ``START_GAP_FACTOR`` times a ceiling), and the arm has not moved at all since the command
@@ -63,6 +68,7 @@ from enum import Enum
 from functools import lru_cache
 
 import numpy as np
+from probdis_ros.motion.jtc import CONTROLLER_RATE, DRIVER_FILTER_TAU, FirstOrderFilter
 
 #: The span over which the gap's growth is judged when tracing a block back to its onset [s].
 RISE_WINDOW = 0.1
@@ -77,6 +83,15 @@ START_WAIT = 2.0
 START_GAP_FACTOR = 3.0
 #: A controller that took a command later than this [s] after it was sent took it late.
 LATE_TAKE = 0.05
+#: An echo is looked for this far [s] either way of a state's time (the controller's phase
+#: and the state's delivery are not known), in steps of ECHO_STEP [s].
+ECHO_WINDOW = 0.03
+ECHO_STEP = 0.001
+#: The joints whose motion an echo is judged on: the iiwa's A1-A4 carry the arm's inertia and
+#: lag their command by tens of milliseconds in joint impedance, where a wrist joint moving
+#: alone can follow it within a tenth of a millisecond (the physics mock's A5-A7), as an
+#: echo does.
+ECHO_JOINTS = slice(0, 4)
 
 
 def noise_of(positions: np.ndarray) -> np.ndarray:
@@ -140,6 +155,7 @@ class DetectorSettings:
     onset_rate: float = 0.1         # L1 gap growth [rad/s] over 0.1 s that is still a rise
     echo_time: float = 0.5          # seconds of lag-free motion that reveal an echo; 0: off
     echo_speed: float = 0.05        # commanded L1 speed [rad/s] that counts as moving
+    driver_tau: float = DRIVER_FILTER_TAU  # the driver's command filter [s], for the echo
     torque_ceiling: float = 0.0     # external torque [Nm] at a joint that is a block; 0: off
     load_mass: float = 0.0          # the grasped load for that estimate [kg] ...
     load_com: tuple[float, float, float] = (0.0, 0.0, 0.0)  # ... at this point [m], flange frame
@@ -151,7 +167,7 @@ class DetectorSettings:
             if not getattr(self, name) > 0:
                 raise ValueError(f'{name} must be positive, got {getattr(self, name)}')
         for name in ('motion_delay', 'gap_ceiling', 'joint_gap_ceiling', 'echo_time',
-                     'speed_allowance', 'torque_ceiling', 'load_mass'):
+                     'speed_allowance', 'torque_ceiling', 'load_mass', 'driver_tau'):
             if not getattr(self, name) >= 0:
                 raise ValueError(f'{name} must be >= 0, got {getattr(self, name)}')
         if len(self.load_com) != 3:
@@ -168,6 +184,33 @@ def gravity_model(load_mass: float, load_com: tuple[float, float, float]
     from probdis_ros.motion.gravity import GravityModel
 
     return GravityModel(load_mass=load_mass, load_com=load_com)
+
+
+class SentCommand:
+    """
+    The command as a driver sends it on, once per controller period, through its filter.
+
+    JTC commands the path one period ahead at each update; the driver's first-order filter
+    passes that on, starting from where the path starts (for an echoing driver, the
+    position it reported when JTC took the path).  Sampled at the updates, linear between.
+    """
+
+    def __init__(self, path, tau: float, period: float = 1.0 / CONTROLLER_RATE) -> None:
+        self.path = path
+        self.period = period
+        self.filter = FirstOrderFilter(tau, period)
+        self.filter.reset(path.at(0.0))
+        self._values = [self.filter.value.copy()]
+
+    def at(self, times: np.ndarray) -> np.ndarray:
+        """Return the commands sent at times [s from the path's start] (N, n)."""
+        steps = np.maximum(np.asarray(times, dtype=float), 0.0) / self.period
+        while len(self._values) < steps.max() + 2:
+            self._values.append(self.filter(self.path.at(len(self._values) * self.period)))
+        values = np.array(self._values)
+        k = np.floor(steps).astype(int)
+        w = (steps - k)[:, None]
+        return values[k] * (1.0 - w) + values[k + 1] * w
 
 
 @dataclass(frozen=True)
@@ -204,6 +247,9 @@ class BlockDetector:
         self._rising: tuple[float, np.ndarray, np.ndarray] | None = None
         self._recent: deque[tuple[float, float, np.ndarray, np.ndarray]] = deque()
         self._echo_since: float | None = None
+        taus = dict.fromkeys((self.settings.driver_tau, 0.0))
+        self._sent = [SentCommand(path, tau) for tau in taus] if self.settings.echo_time \
+            else []
         self.gap = 0.0
         self.joint_gaps = np.zeros(0)
         self.external_torque: np.ndarray | None = None
@@ -232,9 +278,11 @@ class BlockDetector:
         while self._history and self._history[0][0] < now - s.stall_time:
             self._history.popleft()
         ended = t >= self.path.duration + s.motion_delay
-        if self._echoes(now, t, measured, velocity):
-            self.reason = (f'the measured positions followed the command with no lag for '
-                           f'{s.echo_time:.1f} s')
+        # the echo on the time the command was sent, not moved on for a late take: an arm that
+        # lags its command looks taken late, and that shift would line its lag up with the path
+        if self._echoes(now, t + self.late, measured, velocity):
+            self.reason = (f'the measured positions followed the command as the driver '
+                           f'sends it for {s.echo_time:.1f} s')
             return Verdict.ECHO
         if not self.started and self._begins_late(now, t):
             return Verdict.MOVING           # judged from when it began, from the next sample
@@ -369,11 +417,14 @@ class BlockDetector:
         if not s.echo_time:
             return False
         speed = float(np.abs(velocity).sum())
-        # the command itself, one or two controller periods either way: no lag at all
-        commanded = [self.path.sample(t + dt)[0] for dt in (-0.02, -0.01, 0.0, 0.01, 0.02)]
-        lag_free = min(float(np.abs(c - measured).sum()) for c in commanded) < 1e-4 + \
-            0.002 * speed
-        if speed < s.echo_speed or not lag_free:
+        if float(np.abs(velocity[ECHO_JOINTS]).sum()) < s.echo_speed:
+            self._echo_since = None
+            return False
+        # the command as the driver sends it, a few controller periods either way
+        times = t + np.arange(-ECHO_WINDOW, ECHO_WINDOW + ECHO_STEP / 2, ECHO_STEP)
+        closest = min(float(np.abs(sent.at(times) - measured).sum(axis=1).min())
+                      for sent in self._sent)
+        if closest >= 1e-4 + 0.002 * speed:
             self._echo_since = None
             return False
         if self._echo_since is None:

@@ -36,11 +36,18 @@ interface, as the lbr stack runs it:
 from __future__ import annotations
 
 from dataclasses import dataclass
+import math
 
 import numpy as np
 
 #: The lbr stack's ros2_control update rate [Hz].
 CONTROLLER_RATE = 100.0
+#: The time constant [s] of the lbr stack driver's command filter (PR #220 on; its
+#: ``joint_position_tau`` default), which every position command passes before FRI.
+DRIVER_FILTER_TAU = 0.04
+#: Older releases moved the command 0.1 of the way to its target each 10 ms cycle: the same
+#: first-order filter with this time constant [s].
+OLD_DRIVER_FILTER_TAU = -1.0 / (CONTROLLER_RATE * math.log(0.9))
 
 
 @dataclass(frozen=True)
@@ -229,11 +236,14 @@ class FirstOrderFilter:
     """
     The lbr stack driver's command filter: first order with time constant tau [s].
 
-    From PR #220 on, the driver smooths every position command before it goes to FRI;
-    tau = 0 passes commands through (older releases and the kinematic mock).
+    From PR #220 on, the driver smooths every position command before it goes to FRI
+    (:data:`DRIVER_FILTER_TAU`); older releases with :data:`OLD_DRIVER_FILTER_TAU`; tau = 0
+    passes commands through.  A driver in ``open_loop`` reports this filter's output as the
+    arm's position.
     """
 
-    def __init__(self, tau: float = 0.04, period: float = 1.0 / CONTROLLER_RATE) -> None:
+    def __init__(self, tau: float = DRIVER_FILTER_TAU,
+                 period: float = 1.0 / CONTROLLER_RATE) -> None:
         self.alpha = 1.0 if tau <= 0 else 1.0 - float(np.exp(-period / tau))
         self.value: np.ndarray | None = None
 

@@ -108,8 +108,9 @@ def run_physics_episode(scene: str, method: str | Method = 'probabilistic', seed
     act()
     while run.active and robot.time < time_limit:
         robot.step()
-        state = robot.joint_state()
-        run.on_joint_state(state.time, state.position, state.velocity)
+        if robot.stopped is None:       # a stopped driver reports nothing more
+            state = robot.joint_state()
+            run.on_joint_state(state.time, state.position, state.velocity)
         run.tick(robot.time)
         act()
         times.append(robot.time)
@@ -118,6 +119,9 @@ def run_physics_episode(scene: str, method: str | Method = 'probabilistic', seed
         forces.append(sum(c.force for c in robot.engine.contacts()))
     if run.active:
         run.finish(State.STOPPED, f'time limit of {time_limit:.0f} s simulated reached')
+    if robot.stopped is not None:
+        run.message += f' (the driver stopped: {robot.stopped})'
+
     return PhysicsEpisode(
         success=run.phase.value == 'succeeded', outcome=run.phase.value,
         paths=loop.paths_tried, failures=failures, times=np.array(times),

@@ -65,9 +65,9 @@ def _detection(**overrides) -> DetectorSettings:
 
 
 def _motion(path: np.ndarray, velocity_scaling: float):
-    """Return a path timed as the run times it."""
-    settings = replace(RunSettings(), velocity_scaling=velocity_scaling)
-    return time_parameterize(path, settings.limits(iiwa_arm()))
+    """Return a path timed as the run times it (at any scaling, the run's range or beyond)."""
+    limits = replace(RunSettings().limits(iiwa_arm()), velocity_scaling=velocity_scaling)
+    return time_parameterize(path, limits)
 
 
 def _drive(robot, command, settings: DetectorSettings, limit: float,
@@ -122,25 +122,39 @@ LONG_EDGE = (np.array([0.0, 0.6, 0.0, -1.2, 0.0, 0.6, 0.0]),
              np.array([1.5, 1.1, 1.5, -0.7, 1.5, 1.1, 1.5]))
 
 
-def jtc_error_on_long_edge(velocity_scaling: float) -> float:
-    """
-    Return the largest |JTC's desired - measured| of a joint along LONG_EDGE in free space.
+@dataclass
+class LongEdge:
+    """LONG_EDGE in free space at one velocity scaling."""
 
-    What JTC's path tolerance (``constraints.<joint>.trajectory``) is checked against: the
-    arm's lag behind its command, largest at cruise speed.
+    jtc_error: float        # one joint's largest |JTC's desired - measured| [rad]
+    speed_over_limit: float  # the largest measured joint speed / its URDF limit
+
+
+def long_edge(velocity_scaling: float) -> LongEdge:
+    """
+    Run LONG_EDGE in free space (the driver's guard off): the lag and the speed it reaches.
+
+    The lag is what JTC's path tolerance (``constraints.<joint>.trajectory``) is checked
+    against, largest at cruise speed; the speed is what the lbr stack's command guard
+    checks (a measured speed above the URDF's limit stops the driver): the arm in joint
+    impedance overshoots its commanded speed as it catches up.
     """
     start, goal = LONG_EDGE
     robot, _ = build_robot('physics', replace(load_scene('demo_hook'), obstacles=(),
-                                              start=start, goal=goal))
+                                              start=start, goal=goal), RobotSettings(guard=False))
     motion = _motion(np.array([start, goal]), velocity_scaling)
     robot.command(motion.command)
-    error = 0.0
+    error, speed = 0.0, 0.0
+    limits = iiwa_arm().velocity_limits
     while robot.time < motion.duration + 0.5:
+        before = robot.engine.q.copy()
         robot.step()
         running = robot.controller.trajectory
         desired = running.at(robot.time - running.taken_at)
         error = max(error, float(np.abs(desired - robot.engine.q).max()))
-    return error
+        moved = np.abs(robot.engine.q - before) / robot.settings.period
+        speed = max(speed, float((moved / limits).max()))
+    return LongEdge(error, speed)
 
 
 @dataclass

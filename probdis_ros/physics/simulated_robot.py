@@ -24,12 +24,20 @@ moves the arm toward it for one period:
 * :class:`~probdis_ros.physics.arm.PhysicsIiwa`: MuJoCo in joint impedance (the default of
   the mock): lags, swings around a contact, presses with a force set by its stiffness;
 * :class:`KinematicEngine`: the idealised arm of the first mock and the offline simulator:
-  copies the command within the velocity limits and stops dead at the first contact of the
-  flange point with a scenario's hidden obstacles.
+  follows the command with a servo lag within the velocity limits and stops dead at the
+  first contact of the flange point with a scenario's hidden obstacles.
+
+The driver's command guard (the lbr stack's default, ``guard``): a command outside the URDF's
+position limits, or a measured joint speed (the difference of two measured positions over
+the period) above the URDF's velocity limit, stops the driver (:attr:`SimulatedRobot.stopped`
+says why): from then on the arm holds where it is and no joint state is reported, as a
+real driver that threw "invalid command" leaves it.
 
 What the driver reports (:meth:`SimulatedRobot.joint_state`) can carry the faults a real
 setup shows: Gaussian noise, a latency, and the "echo" of a driver with ``open_loop`` in
-effect, whose joint states are the commanded position instead of the measured one.
+effect, whose joint states are the position it commands (JTC's command after the driver's
+filter, as the lbr stack's ``set_state_open_loop`` copies it) instead of the measured one,
+with velocities by differences of those positions and the measured torques as they are.
 No rclpy: the mock node and ``probdis sim --engine physics`` both drive this class.
 """
 
@@ -37,6 +45,7 @@ from __future__ import annotations
 
 from collections import deque
 from dataclasses import dataclass
+import math
 from pathlib import Path
 from typing import Protocol, TYPE_CHECKING
 
@@ -44,6 +53,7 @@ import numpy as np
 from probdis_ros.model.arms import Arm
 from probdis_ros.motion.jtc import (
     CONTROLLER_RATE,
+    DRIVER_FILTER_TAU,
     FirstOrderFilter,
     TrajectoryCommand,
     TrajectoryController,
@@ -68,9 +78,15 @@ class Engine(Protocol):
         """Move toward setpoint for duration seconds of simulated time."""
 
 
+#: The kinematic arm follows its setpoint with this first-order lag [s], as a servo does: an
+#: arm that copied the driver's command at once could not be told from a driver that echoes
+#: it (the planner's echo test), and no real arm does.
+SERVO_TAU = 0.05
+
+
 class KinematicEngine:
     """
-    The idealised arm: follows the setpoint within the velocity limits, stops at contact.
+    The idealised arm: follows the setpoint (a servo lag, the velocity limits), stops at contact.
 
     On contact with a hidden obstacle the flange stops just before it and stays until a
     setpoint leads away (the compliant arm of the offline simulator).
@@ -91,9 +107,10 @@ class KinematicEngine:
         self.compliant.execute(np.array([self.q, self.q]))
 
     def advance(self, setpoint: np.ndarray, duration: float) -> None:
-        """Step toward setpoint, at most the velocity limits allow in duration."""
+        """Step toward setpoint with the servo lag, at most the velocity limits allow."""
         reach = self.arm.velocity_limits * duration
-        step = np.clip(np.asarray(setpoint, dtype=float) - self.q, -reach, reach)
+        share = 1.0 - math.exp(-duration / SERVO_TAU)
+        step = np.clip(share * (np.asarray(setpoint, dtype=float) - self.q), -reach, reach)
         before = self.q
         if np.any(step != 0):
             self.q = self.compliant.execute(np.array([self.q, self.q + step])).config
@@ -106,10 +123,11 @@ class RobotSettings:
     """The command path and what the driver reports; every default in one place."""
 
     period: float = 1.0 / CONTROLLER_RATE   # JTC and driver cycle [s]
-    filter_tau: float = 0.04                # the driver's command filter [s]; 0: none
+    filter_tau: float = DRIVER_FILTER_TAU   # the driver's command filter [s]; 0: none
     noise: float = 0.0                      # std. dev. of reported positions [rad]
     latency: float = 0.0                    # reported joint states are this old [s]
-    echo: bool = False                      # report the command, not the arm (open_loop)
+    echo: bool = False                      # report the command sent, not the arm (open_loop)
+    guard: bool = True                      # the driver's command guard stops it on a fault
     seed: int = 0                           # noise stream
 
     def __post_init__(self) -> None:
@@ -144,6 +162,11 @@ class SimulatedRobot:
         engine.reset(start)
         self.filter.reset(engine.q)
         self.commanded = engine.q.copy()      # JTC's last position command
+        self._sent_before = engine.q.copy()   # the driver's command one period earlier
+        self.stopped: str | None = None       # why the driver's command guard stopped it
+        if self.settings.guard:
+            from probdis_ros.model import iiwa_arm
+            self._limits = iiwa_arm()
         self._reported: deque[JointStateSample] = deque()
         self._report()
 
@@ -158,20 +181,47 @@ class SimulatedRobot:
 
     def step(self) -> None:
         """Run one controller period: JTC update, driver filter, the arm moves."""
+        if self.stopped is not None:        # the driver is down: the arm holds, unreported
+            self.engine.advance(self._held, self.settings.period)
+            return
         state = self._state()       # JTC starts a new trajectory from the reported state
         self.commanded = self.controller.update(self.engine.time, state.position,
                                                 state.velocity)
-        self.engine.advance(self.filter(self.commanded), self.settings.period)
+        self._sent_before = self.filter.value.copy()
+        before = self.engine.q.copy()
+        sent = self.filter(self.commanded)
+        self.engine.advance(sent, self.settings.period)
+        if self.settings.guard:
+            self.stopped = self._guard(sent, before)
+            if self.stopped is not None:
+                self._held = self.engine.q.copy()
+                return
         self._report()
+
+    def _guard(self, sent: np.ndarray, before: np.ndarray) -> str | None:
+        """Return why the lbr stack's command guard refuses this period, or None."""
+        limits = self._limits
+        outside = (sent < limits.lower) | (sent > limits.upper)
+        if outside.any():
+            joint = int(np.argmax(outside))
+            return f'position command of A{joint + 1} outside its limits ({sent[joint]:.4f} rad)'
+        speed = np.abs(self.engine.q - before) / self.settings.period
+        over = speed / limits.velocity_limits
+        if over.max() > 1.0 + 1e-9:
+            joint = int(np.argmax(over))
+            return (f'A{joint + 1} measured at {speed[joint]:.2f} rad/s, above its velocity '
+                    f'limit {limits.velocity_limits[joint]:.2f} rad/s')
+        return None
 
     def _state(self) -> JointStateSample:
         """Return what the driver's state interfaces hold now (no noise, no latency)."""
         e = self.engine
+        effort = np.asarray(getattr(e, 'tau_measured', np.zeros_like(e.q))).copy()
         if self.settings.echo:
-            return JointStateSample(e.time, self.commanded.copy(), np.zeros_like(e.q),
-                                    np.zeros_like(e.q))
-        effort = getattr(e, 'tau_measured', np.zeros_like(e.q))
-        return JointStateSample(e.time, e.q.copy(), e.qdot.copy(), np.asarray(effort).copy())
+            sent = self.filter.value.copy()
+            velocity = (sent - self._sent_before) / self.settings.period
+            return JointStateSample(e.time, sent, velocity, effort)
+        return JointStateSample(e.time, e.q.copy(), e.qdot.copy(), effort)
 
     def _report(self) -> None:
         state = self._state()

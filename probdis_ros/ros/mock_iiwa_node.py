@@ -36,6 +36,7 @@ load-model error of the physics arm.
 
 from __future__ import annotations
 
+from dataclasses import replace
 import sys
 import time
 
@@ -111,6 +112,7 @@ class MockIiwa(Node):
         # simulated time starts at the wall clock, so stamps and bags read as real dates
         self.epoch = time.time()
         self.wall_start = time.monotonic()
+        self.driver_down = False        # the command guard stopped the driver
         self.pub = self.create_publisher(JointState, value('joint_states_topic'),
                                          qos_profile_sensor_data)
         self.clock_pub = self.create_publisher(Clock, '/clock', 10) if self.sim_time else None
@@ -142,6 +144,8 @@ class MockIiwa(Node):
         except ValueError as err:
             self.get_logger().error(f'trajectory refused: {err}')
             return
+        if command.stamp > 0:       # the node's clock counts from its epoch, the arm's from 0
+            command = replace(command, stamp=command.stamp - self.epoch)
         self.robot.command(command)
 
     def _steps_due(self) -> int:
@@ -169,6 +173,12 @@ class MockIiwa(Node):
         steps = self._steps_due()
         for _ in range(steps):
             self.robot.step()
+        if self.robot.stopped is not None:
+            if not self.driver_down:
+                self.driver_down = True
+                self.get_logger().error(f'the command guard stopped the driver: '
+                                        f'{self.robot.stopped}; no more joint states')
+            return
         if steps:
             self._publish(self.robot.joint_state())
 

@@ -67,6 +67,7 @@ from probdis_ros.ros.node_main import run_node
 from probdis_ros.ros.recorder import BagRecorder, message_types
 from probdis_ros.run import (
     Learned,
+    MAX_VELOCITY_SCALING,
     PlanCancelledError,
     PlanFrom,
     rest_command,
@@ -100,7 +101,7 @@ RUN_FIELDS = ('velocity_scaling', 'acceleration_scaling', 'acceleration_limit', 
               'state_timeout', 'replan_tolerance')
 DETECTOR_FIELDS = ('d_dist', 'stall_time', 'stall_motion', 'settle_time', 'motion_delay',
                    'gap_ceiling', 'joint_gap_ceiling', 'onset_gap', 'echo_time',
-                   'torque_ceiling', 'load_mass', 'load_com')
+                   'driver_tau', 'torque_ceiling', 'load_mass', 'load_com')
 #: After a refused joint state, ~/start is refused for this long [s].
 REFUSAL_HOLD = 1.0
 #: How often the graph is checked: the trajectory topic's subscribers, namesakes [s].
@@ -142,7 +143,9 @@ PARAMETERS = {
     'goal': ([0.0] * 7, ParameterDescriptor(
         description='goal configuration [rad], 7 values within the joint limits')),
     'velocity_scaling': (RUN.velocity_scaling, _float(
-        'fraction of the URDF velocity limits', 0.01, 1.0)),
+        'fraction of the URDF velocity limits (faster than 0.7, the arm in joint impedance '
+        "overshoots them and the driver's command guard stops it)", 0.01,
+        MAX_VELOCITY_SCALING)),
     'acceleration_scaling': (RUN.acceleration_scaling, _float(
         'fraction of the acceleration and jerk limits', 0.01, 1.0)),
     'acceleration_limit': (RUN.acceleration_limit, _float(
@@ -165,8 +168,12 @@ PARAMETERS = {
                                                            'block at once; 0: off', 0.0, 10.0)),
     'onset_gap': (DETECT.onset_gap, _float('a block began where the gap last rose above this '
                                            '[rad]', 0.001, 1.0)),
-    'echo_time': (DETECT.echo_time, _float('seconds of lag-free motion that reveal a driver '
-                                           'echoing the command; 0: off', 0.0, 10.0)),
+    'echo_time': (DETECT.echo_time, _float('seconds of motion that follows the command as '
+                                           'the driver sends it and reveals a driver echoing '
+                                           'it; 0: off', 0.0, 10.0)),
+    'driver_tau': (DETECT.driver_tau, _float("the time constant [s] of the driver's command "
+                                             "filter (the lbr stack's joint_position_tau), "
+                                             'for the echo test', 0.0, 1.0)),
     'torque_ceiling': (DETECT.torque_ceiling, _float(
         'external torque [Nm] at a joint (measured effort minus the gravity of arm and load) '
         'that is a block at once; needs efforts in the joint states; 0: off', 0.0, 500.0)),
