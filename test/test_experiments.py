@@ -176,6 +176,20 @@ def test_the_bootstrap_interval_matches_the_exact_bootstrap_distribution():
     assert bootstrap_ci(values) == bootstrap_ci(values)          # seeded
 
 
+def test_the_summary_does_not_depend_on_the_order_the_workers_finished_in():
+    """Shuffle the records (as two workers may finish them): the same intervals."""
+    rng = np.random.default_rng(7)
+    records = [{'setting': '2d', 'obstacles': 1, 'method': method, 'max_paths': 20,
+                'world': w, 'world_seed': 1000 + w, 'success': bool(rng.random() < 0.6),
+                'paths': int(rng.integers(1, 21)), 'plan_times_s': [0.01], 'wall_s': 1.0,
+                'empty_plans': 0}
+               for w in range(30) for method in ('probabilistic', 'epsilon:0.2')]
+    summary = summarise(records)
+    for seed in range(3):
+        shuffled = [records[k] for k in np.random.default_rng(seed).permutation(len(records))]
+        assert summarise(shuffled) == summary
+
+
 def test_success_within_n_paths_counts_only_successes_after_at_most_n_paths():
     records = [{'setting': '2d', 'obstacles': 1, 'method': 'probabilistic', 'max_paths': 4,
                 'success': success, 'paths': paths, 'plan_times_s': [0.1] * paths,

@@ -17,7 +17,8 @@
 
 For every (setting, obstacle count, method): the success rate within n planned paths for
 n = 1..max (an episode succeeded within n if it succeeded after at most n paths), with a 95 %
-percentile-bootstrap interval over the worlds; the mean number of paths of the successful
+percentile-bootstrap interval over the worlds (taken in world order, not the order the
+workers finished in); the mean number of paths of the successful
 episodes; the planning time per path; the share of the paths that were empty plans (no
 feasible path found, the arm did not move; records older than that count are shown as
 unknown).  Written as ``success.png`` (like the paper's Fig. 4),
@@ -76,14 +77,29 @@ def success_curve(records: list[dict], max_paths: int) -> dict:
     return {'rate': rate, 'low': low, 'high': high}
 
 
-def summarise(records: list[dict]) -> dict:
-    """Group episodes by family or setting and obstacle count, and method; compute figures."""
+def world_order(record: dict) -> tuple:
+    """Return a record's place among its group's: by world index, then world seed."""
+    return (record.get('world', -1), record.get('world_seed', -1))
+
+
+def group_records(records: list[dict]) -> dict[tuple, list[dict]]:
+    """
+    Return the records by (family, setting, obstacles, method), each group sorted by world.
+
+    The file's order is the order the workers finished in; the bootstrap resamples by
+    position, so its intervals must not depend on that order.
+    """
     groups: dict[tuple, list[dict]] = defaultdict(list)
     for record in records:
         groups[(record.get('family', ''), record['setting'], record['obstacles'],
                 record['method'])].append(record)
+    return {key: sorted(group, key=world_order) for key, group in sorted(groups.items())}
+
+
+def summarise(records: list[dict]) -> dict:
+    """Group episodes by family or setting and obstacle count, and method; compute figures."""
     cells = []
-    for (family, setting, obstacles, method), group in sorted(groups.items()):
+    for (family, setting, obstacles, method), group in group_records(records).items():
         max_paths = group[0]['max_paths']
         curve = success_curve(group, max_paths)
         wins = [r['paths'] for r in group if r['success']]
