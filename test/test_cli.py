@@ -306,3 +306,29 @@ def test_an_offline_run_that_fails_is_tried_again_offline(tmp_path, monkeypatch,
     assert status == 0 and calls == [('demo_hook', 'informed:af', 0)] * 2
     records = json.loads(capsys.readouterr().out)
     assert [(r['success'], r['offline']) for r in records] == [(True, True)]
+
+
+def test_the_robot_table_counts_only_the_runs_asked_for(tmp_path, monkeypatch, capsys):
+    from probdis_ros import cli
+    from probdis_ros.ros import robot_experiment
+
+    def record(run, success):
+        return {'scenario': 'demo_hook', 'method': 'probabilistic', 'run': run, 'seed': run,
+                'engine': 'physics', 'velocity_scaling': 0.2, 'success': success,
+                'paths': 3, 'failures': 2, 'wall_s': 1.0, 'bag': None, 'offline': True,
+                'detection': {}}
+
+    # an earlier --runs 3 left runs 0-2; run 0 failed, runs 1 and 2 succeeded
+    (tmp_path / 'robot_runs.jsonl').write_text(
+        ''.join(json.dumps(record(run, run > 0)) + '\n' for run in range(3)))
+
+    def no_run(*args):
+        raise AssertionError('every run asked for is done')
+
+    monkeypatch.setattr(robot_experiment, 'offline_run', no_run)
+    args = ['experiment', 'robot', '--offline', '--runs', '1', '--scenarios', 'demo_hook',
+            '--methods', 'probabilistic', '--out', str(tmp_path)]
+    assert cli.main([*args, '--json']) == 0
+    assert [r['run'] for r in json.loads(capsys.readouterr().out)] == [0]
+    assert cli.main(args) == 0
+    assert '| demo_hook | 0 / 1 |' in capsys.readouterr().out
