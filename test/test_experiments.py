@@ -127,6 +127,47 @@ def test_a_sweep_of_another_seed_is_refused_in_the_same_directory(tmp_path):
         run_sweep(keys, tmp_path, workers=1, rrt={'iterations': 400})
 
 
+def test_an_episode_that_raises_is_recorded_as_errored_and_the_sweep_goes_on(
+        tmp_path, monkeypatch, capsys):
+    from dask.distributed import LocalCluster
+    from probdis_ros.sim import episode
+
+    real = episode.run_episode
+
+    def fails_in_world_1(world, method, seed=0, **kwargs):
+        if seed == keys[1].world_seed:
+            raise RuntimeError('the planner fell over')
+        return real(world, method, seed=seed, **kwargs)
+
+    keys = episode_keys(['2d'], [1], 3, [Method.parse('epsilon:0.2')], 0)
+    monkeypatch.setattr(episode, 'run_episode', fails_in_world_1)
+    # workers in this process (threads), so that they run the patched episode
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                      dashboard_address=None) as cluster:
+        report = run_sweep(keys, tmp_path, scheduler=cluster.scheduler_address)
+    assert report.ran == 3
+    records = {r['world']: r for r in read_episodes(tmp_path / EPISODES_FILE)}
+    assert sorted(records) == [0, 1, 2]
+    failed = records[1]
+    assert failed['error'] == 'RuntimeError: the planner fell over'
+    assert (failed['success'], failed['paths'], failed['method'], failed['world_seed'],
+            failed['id']) == (False, 0, 'epsilon:0.2', keys[1].world_seed, keys[1].name)
+    assert 'error' not in records[0] and 'error' not in records[2]
+    warning = [line for line in capsys.readouterr().err.splitlines() if 'warning' in line]
+    assert len(warning) == 1 and keys[1].name in warning[0] and 'fell over' in warning[0]
+    # the report counts it as unsolved and says it errored
+    summary = write_report(tmp_path)
+    cell = summary['cells'][0]
+    solved = sum(records[w]['success'] for w in (0, 2))
+    assert (cell['episodes'], cell['errored'], cell['success']) == (3, 1, solved / 3)
+    assert summary['errored'] == [{'id': keys[1].name,
+                                   'error': 'RuntimeError: the planner fell over'}]
+    assert '1 of 3 episodes errored (counted as unsolved' in \
+        (tmp_path / 'summary.md').read_text()
+    # resumed: the errored episode is done, nothing runs again
+    assert run_sweep(keys, tmp_path, workers=1).ran == 0
+
+
 def test_family_worlds_are_seeds_from_the_sweep_seed_and_go_world_by_world():
     methods = [Method.parse('probabilistic'), Method.parse('epsilon:0.2')]
     keys = family_keys(['open_box', 'clutter'], 3, methods, 1000)

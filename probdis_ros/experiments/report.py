@@ -110,6 +110,8 @@ def summarise(records: list[dict]) -> dict:
             'setting': setting, 'obstacles': obstacles, 'method': method,
             **({'family': family} if family else {}),
             'episodes': len(group), 'max_paths': max_paths,
+            # episodes that raised (sweep records their error): counted as unsolved
+            'errored': sum('error' in r for r in group),
             'success': curve['rate'][-1], 'ci95': [curve['low'][-1], curve['high'][-1]],
             'curve': curve,
             'mean_paths_successful': statistics.fmean(wins) if wins else None,
@@ -117,7 +119,9 @@ def summarise(records: list[dict]) -> dict:
             'empty_plan_share': sum(r['empty_plans'] for r in counted) / paths
             if paths and len(counted) == len(group) else None,
             'episode_wall_s_mean': statistics.fmean(r['wall_s'] for r in group)})
+    errored = [r for r in records if 'error' in r]
     return {'cells': cells, 'episodes': len(records),
+            'errored': [{'id': r.get('id', '?'), 'error': r['error']} for r in errored],
             'bootstrap': {'samples': BOOTSTRAP_SAMPLES, 'seed': BOOTSTRAP_SEED,
                           'level': 0.95}}
 
@@ -170,7 +174,20 @@ def markdown_tables(summary: dict) -> str:
         parts.append(markdown_table(summary))
     if family_cells(summary):
         parts.append(family_table(summary))
+    if summary.get('errored'):
+        parts.append(errors_markdown(summary))
     return '\n'.join(parts)
+
+
+def errors_markdown(summary: dict) -> str:
+    """Return how many episodes errored (counted as unsolved above), and which ('' if none)."""
+    errored = summary.get('errored') or []
+    if not errored:
+        return ''
+    lines = [f'{len(errored)} of {summary["episodes"]} episodes errored (counted as unsolved '
+             'in the tables):', '']
+    lines += [f'- {e["id"]}: {e["error"]}' for e in errored]
+    return '\n'.join(lines) + '\n'
 
 
 def markdown_table(summary: dict) -> str:
@@ -328,6 +345,8 @@ def write_report(directory: str | Path) -> dict:
         text.append(family_table(summary))
         plot_family_curves(summary, directory / 'families.png')
         files.append('families.png')
+    if summary['errored']:
+        text.append(errors_markdown(summary))
     summary['files'] = [*files, 'summary.json', 'summary.md']
     # (a report killed midway leaves the previous summary or the new one, never half)
     write_atomically(directory / 'summary.json', json.dumps(summary, indent=1) + '\n',
