@@ -102,8 +102,11 @@ def test_sim_json_prints_the_episode(probdis):
 
 def test_sim_of_the_shipped_scenario_with_a_plot(probdis, tmp_path):
     out = tmp_path / 'demo.png'
+    from probdis_ros.planning.informed import DEFAULT_IDEAS
+
     result = probdis('sim', '--scenario', 'demo_2d', '--plot', str(out))
-    assert 'demo_2d: informed: disentangled' in result.stdout   # the default method
+    # the default method, named by its ideas
+    assert f'demo_2d: informed:{DEFAULT_IDEAS}: disentangled' in result.stdout
     assert out.read_bytes()[:4] == b'\x89PNG'
 
 
@@ -332,3 +335,31 @@ def test_the_robot_table_counts_only_the_runs_asked_for(tmp_path, monkeypatch, c
     assert [r['run'] for r in json.loads(capsys.readouterr().out)] == [0]
     assert cli.main(args) == 0
     assert '| demo_hook | 0 / 1 |' in capsys.readouterr().out
+
+
+def test_a_robot_run_of_the_bare_informed_of_before_is_run_again(
+        tmp_path, monkeypatch, capsys):
+    from probdis_ros import cli
+    from probdis_ros.planning.informed import DEFAULT_IDEAS
+    from probdis_ros.ros import robot_experiment
+
+    old = {'scenario': 'demo_hook', 'method': 'informed', 'run': 0, 'seed': 0,
+           'engine': 'physics', 'velocity_scaling': 0.2, 'success': False, 'paths': 20,
+           'failures': 20, 'wall_s': 1.0, 'bag': None, 'offline': True, 'detection': {}}
+    (tmp_path / 'robot_runs.jsonl').write_text(json.dumps(old) + '\n')
+    calls = []
+
+    def offline(scenario, method, run, velocity_scaling, detection):
+        calls.append((scenario, str(method), run))
+        return {'success': True, 'paths': 2, 'failures': 1, 'bag': None}
+
+    monkeypatch.setattr(robot_experiment, 'offline_run', offline)
+    args = ['experiment', 'robot', '--offline', '--runs', '1', '--scenarios', 'demo_hook',
+            '--methods', 'informed', '--out', str(tmp_path)]
+    assert cli.main([*args, '--json']) == 0
+    assert calls == [('demo_hook', f'informed:{DEFAULT_IDEAS}', 0)]
+    records = json.loads(capsys.readouterr().out)
+    assert [(r['method'], r['success']) for r in records] == \
+        [(f'informed:{DEFAULT_IDEAS}', True)]
+    assert cli.main(args) == 0 and calls == [calls[0]]      # now done
+    assert '| demo_hook | 1 / 1 |' in capsys.readouterr().out

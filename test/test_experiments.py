@@ -14,6 +14,7 @@
 
 """Sweeps on a Dask LocalCluster (resumable after a kill) and the report's statistics."""
 
+from dataclasses import asdict
 import itertools
 import json
 import os
@@ -166,6 +167,25 @@ def test_an_episode_that_raises_is_recorded_as_errored_and_the_sweep_goes_on(
         (tmp_path / 'summary.md').read_text()
     # resumed: the errored episode is done, nothing runs again
     assert run_sweep(keys, tmp_path, workers=1).ran == 0
+
+
+def test_a_record_of_the_bare_informed_of_before_is_not_taken_for_todays_default(tmp_path):
+    """Records labelled ``informed`` ran an older default: a resumed sweep runs it anew."""
+    from probdis_ros.planning.informed import DEFAULT_IDEAS
+
+    informed = Method.parse('informed')
+    assert str(informed) == f'informed:{DEFAULT_IDEAS}' and Method.parse(str(informed)) == \
+        informed
+    keys = episode_keys(['2d'], [1], 1, [informed], 0)
+    old = {**asdict(keys[0]), 'method': 'informed', 'id': '2d/1/0/informed',
+           'world_seed': keys[0].world_seed, 'success': True, 'paths': 1, 'failures': 0,
+           'empty_plans': 0, 'max_paths': 2, 'plan_times_s': [0.01], 'wall_s': 1.0}
+    (tmp_path / EPISODES_FILE).write_text(json.dumps(old) + '\n')
+    assert run_sweep(keys, tmp_path, max_paths=2, workers=1).ran == 1
+    methods = [r['method'] for r in read_episodes(tmp_path / EPISODES_FILE)]
+    assert methods == ['informed', f'informed:{DEFAULT_IDEAS}']
+    # and the report keeps the two variants apart
+    assert {c['method'] for c in write_report(tmp_path)['cells']} == set(methods)
 
 
 def test_family_worlds_are_seeds_from_the_sweep_seed_and_go_world_by_world():
