@@ -29,8 +29,10 @@ import numpy as np
 from probdis_ros.experiments.report import (
     bootstrap_ci,
     claims,
+    claims_markdown,
     family_table,
     markdown_table,
+    paired_markdown,
     summarise,
     write_report,
 )
@@ -353,6 +355,62 @@ def test_the_claims_compare_with_the_best_baseline_and_find_ranking_flips():
     assert hard['best_by_obstacles'] == {1: 'hard:0.02', 10: 'hard:0.01'}
     assert hard['best_changes'] and abs(hard['largest_gap'] - 0.25) < 1e-12
     assert [f['family'] for f in verdicts['sensitivity']] == ['hard']   # one epsilon value
+
+
+def test_the_comparison_with_the_paper_is_paired_by_world():
+    """
+    Check the paired comparison on worlds where the answer is known.
+
+    The paper's method solves worlds 0-9 in 5 paths.  ``epsilon:0.2`` solves those in 3
+    paths and worlds 10-19 too, in 15: its mean over its own successes (9) is above the
+    paper's (5), over the worlds both solved below (3 against 5); it succeeds in 10 more
+    worlds of 20.  ``hard:0.01`` solves exactly the paper's worlds: a difference of 0 in
+    every world, so the paired interval is 0-0 (unpaired, both rates' intervals are wide).
+    """
+    def record(method, world, success, paths):
+        return {'setting': '2d', 'obstacles': 10, 'method': method, 'max_paths': 20,
+                'world': world, 'world_seed': 500 + world, 'success': success,
+                'paths': paths if success else 20, 'plan_times_s': [0.01], 'wall_s': 1.0,
+                'empty_plans': 0}
+
+    records = [record('probabilistic', w, w < 10, 5) for w in range(20)]
+    records += [record('epsilon:0.2', w, True, 3 if w < 10 else 15) for w in range(20)]
+    records += [record('hard:0.01', w, w < 10, 7) for w in range(20)]
+    records.reverse()                       # the order the file holds them in does not matter
+    summary = summarise(records)
+    rows = {r['method']: r for r in summary['paired']}
+    assert set(rows) == {'epsilon:0.2', 'hard:0.01'}
+    eps, hard = rows['epsilon:0.2'], rows['hard:0.01']
+    cells = {c['method']: c for c in summary['cells']}
+    assert cells['epsilon:0.2']['mean_paths_successful'] == 9.0     # its own successes
+    assert (eps['worlds'], eps['both_solved'], eps['mean_paths_both_solved']) == \
+        (20, 10, [3.0, 5.0])
+    assert (eps['success'], eps['success_paper'], eps['difference']) == (1.0, 0.5, 0.5)
+    # the worlds resampled: the interval of the mean of ten 1s and ten 0s
+    assert eps['difference_ci95'] == list(bootstrap_ci(np.array([0.0] * 10 + [1.0] * 10)))
+    assert 0.25 < eps['difference_ci95'][0] < 0.5 < eps['difference_ci95'][1] < 0.75
+    assert (hard['difference'], hard['difference_ci95']) == (0.0, [0.0, 0.0])
+    assert cells['hard:0.01']['ci95'][0] < 0.4 and cells['hard:0.01']['ci95'][1] > 0.6
+    # the claims' row for the best baseline carries its paired comparison
+    verdicts = claims(summary)
+    beat = verdicts['beats_every_baseline'][0]
+    assert beat['best_baseline'] == 'epsilon:0.2' and beat['paired'] == eps
+    text = claims_markdown(verdicts)
+    low, high = eps['difference_ci95']
+    assert f'| -0.50 ({-high:+.2f} to {-low:+.2f}) | 5.0 / 3.0 |' in text
+    table = paired_markdown(summary, families=False)
+    assert f'| 2d | 10 | epsilon:0.2 | 20 | 1.00 / 0.50 | +0.50 ({low:+.2f} to {high:+.2f}) ' \
+        '| 10 | 3.0 / 5.0 |' in table
+    assert '| 2d | 10 | hard:0.01 | 20 | 0.50 / 0.50 | +0.00 (+0.00 to +0.00) | 10 | 7.0 / 5.0 |' \
+        in table
+    assert paired_markdown(summary, families=True) == ''
+    # families pair the same way, in their own table
+    family = [{**r, 'family': 'open_box', 'setting': '3d-orient', 'obstacles': 0}
+              for r in records]
+    rows = summarise(family)['paired']
+    assert [(r['family'], r['method'], r['difference']) for r in rows] == [
+        ('open_box', 'epsilon:0.2', 0.5), ('open_box', 'hard:0.01', 0.0)]
+    assert '| open_box | epsilon:0.2 | 20 |' in paired_markdown(summarise(family), True)
 
 
 def report_record(world, method='probabilistic'):

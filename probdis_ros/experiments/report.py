@@ -18,14 +18,16 @@
 For every (setting, obstacle count, method): the success rate within n planned paths for
 n = 1..max (an episode succeeded within n if it succeeded after at most n paths), with a 95 %
 percentile-bootstrap interval over the worlds (taken in world order, not the order the
-workers finished in); the mean number of paths of the successful
-episodes; the planning time per path; the share of the paths that were empty plans (no
-feasible path found, the arm did not move; records older than that count are shown as
-unknown).  Written as ``success.png`` (like the paper's Fig. 4),
-``sensitivity.png`` (success at the maximum, like its Fig. 5), ``summary.json`` and
-``summary.md``.  Episodes of entanglement families (``sweep --family``) are grouped by family
-and method instead, tabled apart and drawn in ``families.png``, a panel per family; the
-figures of the settings are written only where the directory holds settings.
+workers finished in); the mean number of paths of the successful episodes; the planning time
+per path; the share of the paths that were empty plans (no feasible path found, the arm did
+not move; records older than that count are shown as unknown).  Written as ``success.png``
+(like the paper's Fig. 4), ``sensitivity.png`` (success at the maximum, like its Fig. 5),
+``summary.json`` and ``summary.md``.  Every method is also set against the paper's
+(probabilistic) on the worlds both ran: the difference of success with a paired bootstrap
+interval, and the mean paths over the worlds both solved.  Episodes of entanglement families
+(``sweep --family``) are grouped by family and method instead, tabled apart and drawn in
+``families.png``, a panel per family; the figures of the settings are written only where the
+directory holds settings.
 """
 
 from __future__ import annotations
@@ -120,10 +122,78 @@ def summarise(records: list[dict]) -> dict:
             if paths and len(counted) == len(group) else None,
             'episode_wall_s_mean': statistics.fmean(r['wall_s'] for r in group)})
     errored = [r for r in records if 'error' in r]
-    return {'cells': cells, 'episodes': len(records),
+    return {'cells': cells, 'episodes': len(records), 'paired': paired_rows(records),
             'errored': [{'id': r.get('id', '?'), 'error': r['error']} for r in errored],
             'bootstrap': {'samples': BOOTSTRAP_SAMPLES, 'seed': BOOTSTRAP_SEED,
                           'level': 0.95}}
+
+
+#: The paper's method, against which the paired comparisons are made.
+PAPER_METHOD = 'probabilistic'
+
+
+def paired(ours: list[dict], theirs: list[dict]) -> dict | None:
+    """
+    Compare a method's episodes (theirs) with the paper's (ours) on the worlds both ran.
+
+    Per world, the difference of success (1, 0 or -1); its mean with a paired 95 %
+    percentile-bootstrap interval (the worlds resampled, as :func:`bootstrap_ci`); and the
+    mean paths of each over the worlds both solved (each method's own successes are
+    different worlds).  None if no world is in both (records without a world index pair
+    with nothing).
+    """
+    mine = {world_order(r): r for r in ours if 'world' in r}
+    other = {world_order(r): r for r in theirs if 'world' in r}
+    common = sorted(set(mine) & set(other))
+    if not common:
+        return None
+    diffs = np.array([float(other[w]['success']) - float(mine[w]['success']) for w in common])
+    both = [w for w in common if mine[w]['success'] and other[w]['success']]
+    ci = bootstrap_ci(diffs)
+    return {'worlds': len(common),
+            'success': statistics.fmean(float(other[w]['success']) for w in common),
+            'success_paper': statistics.fmean(float(mine[w]['success']) for w in common),
+            'difference': float(diffs.mean()), 'difference_ci95': [ci[0], ci[1]],
+            'both_solved': len(both),
+            'mean_paths_both_solved': [statistics.fmean(other[w]['paths'] for w in both),
+                                       statistics.fmean(mine[w]['paths'] for w in both)]
+            if both else None}
+
+
+def paired_rows(records: list[dict]) -> list[dict]:
+    """Return every method against the paper's, paired by world, per family or setting cell."""
+    groups = group_records(records)
+    rows = []
+    for (family, setting, obstacles, method), group in groups.items():
+        ours = groups.get((family, setting, obstacles, PAPER_METHOD))
+        if method == PAPER_METHOD or ours is None:
+            continue
+        comparison = paired(ours, group)
+        if comparison is not None:
+            rows.append({'setting': setting, 'obstacles': obstacles, 'method': method,
+                         **({'family': family} if family else {}), **comparison})
+    return rows
+
+
+def paired_markdown(summary: dict, families: bool) -> str:
+    """Return the paired comparisons with the paper's method (families' or settings') ('')."""
+    rows = [r for r in summary.get('paired', []) if bool(r.get('family')) == families]
+    if not rows:
+        return ''
+    where = '| family |' if families else '| setting | obstacles |'
+    lines = [f'{where} method | worlds of both | success: method / probabilistic '
+             '| difference, method - probabilistic (paired 95 % CI) | worlds both solved '
+             '| mean paths on the worlds both solved: method / probabilistic |',
+             '| --- ' * (8 if not families else 7) + '|']
+    for r in rows:
+        cell = f'| {r["family"]} |' if families else f'| {r["setting"]} | {r["obstacles"]} |'
+        low, high = r['difference_ci95']
+        both = r['mean_paths_both_solved']
+        paths = '-' if both is None else f'{both[0]:.1f} / {both[1]:.1f}'
+        lines.append(f'{cell} {r["method"]} | {r["worlds"]} | {r["success"]:.2f} / '
+                     f'{r["success_paper"]:.2f} | {r["difference"]:+.2f} ({low:+.2f} to '
+                     f'{high:+.2f}) | {r["both_solved"]} | {paths} |')
+    return '\n'.join(lines) + '\n'
 
 
 def _settings(summary: dict) -> dict:
@@ -218,6 +288,8 @@ def claims(summary: dict) -> dict:
     cells: dict[tuple, dict[str, dict]] = defaultdict(dict)
     for c in _settings(summary)['cells']:
         cells[(c['setting'], c['obstacles'])][c['method']] = c
+    pairs = {(r['setting'], r['obstacles'], r['method']): r
+             for r in summary.get('paired', []) if not r.get('family')}
     beats = []
     for (setting, obstacles), methods in sorted(cells.items()):
         ours = methods.get('probabilistic')
@@ -229,7 +301,9 @@ def claims(summary: dict) -> dict:
                       'probabilistic': ours['success'], 'ci95': ours['ci95'],
                       'best_baseline': best, 'baseline': others[best]['success'],
                       'at_least_as_good': ours['success'] >= others[best]['success'],
-                      'clear': ours['ci95'][0] > others[best]['success']})
+                      'clear': ours['ci95'][0] > others[best]['success'],
+                      # the same worlds: the baseline's paired difference from ours
+                      'paired': pairs.get((setting, obstacles, best))})
     families: dict[tuple, dict[int, dict[str, float]]] = defaultdict(lambda: defaultdict(dict))
     for (setting, obstacles), methods in cells.items():
         for method, c in methods.items():
@@ -257,12 +331,24 @@ def claims(summary: dict) -> dict:
 def claims_markdown(verdicts: dict) -> str:
     """Return the claims as two Markdown tables."""
     lines = ['| setting | obstacles | probabilistic (95 % CI) | best baseline | its rate '
-             '| probabilistic >= every baseline |', '| --- | --- | --- | --- | --- | --- |']
+             '| probabilistic >= every baseline '
+             '| probabilistic - baseline, same worlds (paired 95 % CI) '
+             '| mean paths on the worlds both solved: probabilistic / baseline |',
+             '| --- | --- | --- | --- | --- | --- | --- | --- |']
     for b in verdicts['beats_every_baseline']:
         verdict = ('yes, clearly' if b['clear'] else 'yes') if b['at_least_as_good'] else 'NO'
+        pair = b.get('paired')
+        if pair is None:
+            difference = paths = '-'
+        else:       # the pair is baseline - probabilistic: turned round (+ 0.0: no -0.00)
+            low, high = pair['difference_ci95']
+            difference = (f'{-pair["difference"] + 0.0:+.2f} ({-high + 0.0:+.2f} to '
+                          f'{-low + 0.0:+.2f})')
+            both = pair['mean_paths_both_solved']
+            paths = '-' if both is None else f'{both[1]:.1f} / {both[0]:.1f}'
         lines.append(f'| {b["setting"]} | {b["obstacles"]} | {b["probabilistic"]:.2f} '
                      f'({b["ci95"][0]:.2f}-{b["ci95"][1]:.2f}) | {b["best_baseline"]} | '
-                     f'{b["baseline"]:.2f} | {verdict} |')
+                     f'{b["baseline"]:.2f} | {verdict} | {difference} | {paths} |')
     lines += ['', '| setting | method | best value per obstacle count | ranking flips '
               '| largest gap between values |', '| --- | --- | --- | --- | --- |']
     for s in verdicts['sensitivity']:
@@ -338,11 +424,15 @@ def write_report(directory: str | Path) -> dict:
     text = []
     if settings['cells']:
         text += [markdown_table(summary), claims_markdown(summary['claims'])]
+        if paired_markdown(summary, families=False):
+            text.append(paired_markdown(summary, families=False))
         plot_success_curves(settings, directory / 'success.png')
         plot_sensitivity(settings, directory / 'sensitivity.png')
         files += ['success.png', 'sensitivity.png']
     if family_cells(summary):
         text.append(family_table(summary))
+        if paired_markdown(summary, families=True):
+            text.append(paired_markdown(summary, families=True))
         plot_family_curves(summary, directory / 'families.png')
         files.append('families.png')
     if summary['errored']:
