@@ -316,8 +316,10 @@ def cmd_experiment_robot(args: argparse.Namespace) -> int:
                                    engine=args.engine, sim_time=args.sim_time,
                                    real_time_factor=args.real_time_factor,
                                    offline=args.offline, detection=detection)
-    wanted = {(s, str(m)) for s in scenarios for m in methods}
-    records = [r for r in records if (r['scenario'], r['method']) in wanted]
+    # the runs asked for only: a DIR may hold more runs (an earlier --runs), other scenes
+    # or methods
+    wanted = {(s, str(m), r) for s in scenarios for m in methods for r in range(runs)}
+    records = [r for r in records if (r['scenario'], r['method'], r.get('run')) in wanted]
     if args.json:
         _print_json(records)
     else:

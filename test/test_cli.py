@@ -102,8 +102,11 @@ def test_sim_json_prints_the_episode(probdis):
 
 def test_sim_of_the_shipped_scenario_with_a_plot(probdis, tmp_path):
     out = tmp_path / 'demo.png'
+    from probdis_ros.planning.informed import DEFAULT_IDEAS
+
     result = probdis('sim', '--scenario', 'demo_2d', '--plot', str(out))
-    assert 'demo_2d: informed: disentangled' in result.stdout   # the default method
+    # the default method, named by its ideas
+    assert f'demo_2d: informed:{DEFAULT_IDEAS}: disentangled' in result.stdout
     assert out.read_bytes()[:4] == b'\x89PNG'
 
 
@@ -306,3 +309,57 @@ def test_an_offline_run_that_fails_is_tried_again_offline(tmp_path, monkeypatch,
     assert status == 0 and calls == [('demo_hook', 'informed:af', 0)] * 2
     records = json.loads(capsys.readouterr().out)
     assert [(r['success'], r['offline']) for r in records] == [(True, True)]
+
+
+def test_the_robot_table_counts_only_the_runs_asked_for(tmp_path, monkeypatch, capsys):
+    from probdis_ros import cli
+    from probdis_ros.ros import robot_experiment
+
+    def record(run, success):
+        return {'scenario': 'demo_hook', 'method': 'probabilistic', 'run': run, 'seed': run,
+                'engine': 'physics', 'velocity_scaling': 0.2, 'success': success,
+                'paths': 3, 'failures': 2, 'wall_s': 1.0, 'bag': None, 'offline': True,
+                'detection': {}}
+
+    # an earlier --runs 3 left runs 0-2; run 0 failed, runs 1 and 2 succeeded
+    (tmp_path / 'robot_runs.jsonl').write_text(
+        ''.join(json.dumps(record(run, run > 0)) + '\n' for run in range(3)))
+
+    def no_run(*args):
+        raise AssertionError('every run asked for is done')
+
+    monkeypatch.setattr(robot_experiment, 'offline_run', no_run)
+    args = ['experiment', 'robot', '--offline', '--runs', '1', '--scenarios', 'demo_hook',
+            '--methods', 'probabilistic', '--out', str(tmp_path)]
+    assert cli.main([*args, '--json']) == 0
+    assert [r['run'] for r in json.loads(capsys.readouterr().out)] == [0]
+    assert cli.main(args) == 0
+    assert '| demo_hook | 0 / 1 |' in capsys.readouterr().out
+
+
+def test_a_robot_run_of_the_bare_informed_of_before_is_run_again(
+        tmp_path, monkeypatch, capsys):
+    from probdis_ros import cli
+    from probdis_ros.planning.informed import DEFAULT_IDEAS
+    from probdis_ros.ros import robot_experiment
+
+    old = {'scenario': 'demo_hook', 'method': 'informed', 'run': 0, 'seed': 0,
+           'engine': 'physics', 'velocity_scaling': 0.2, 'success': False, 'paths': 20,
+           'failures': 20, 'wall_s': 1.0, 'bag': None, 'offline': True, 'detection': {}}
+    (tmp_path / 'robot_runs.jsonl').write_text(json.dumps(old) + '\n')
+    calls = []
+
+    def offline(scenario, method, run, velocity_scaling, detection):
+        calls.append((scenario, str(method), run))
+        return {'success': True, 'paths': 2, 'failures': 1, 'bag': None}
+
+    monkeypatch.setattr(robot_experiment, 'offline_run', offline)
+    args = ['experiment', 'robot', '--offline', '--runs', '1', '--scenarios', 'demo_hook',
+            '--methods', 'informed', '--out', str(tmp_path)]
+    assert cli.main([*args, '--json']) == 0
+    assert calls == [('demo_hook', f'informed:{DEFAULT_IDEAS}', 0)]
+    records = json.loads(capsys.readouterr().out)
+    assert [(r['method'], r['success']) for r in records] == \
+        [(f'informed:{DEFAULT_IDEAS}', True)]
+    assert cli.main(args) == 0 and calls == [calls[0]]      # now done
+    assert '| demo_hook | 1 / 1 |' in capsys.readouterr().out

@@ -14,6 +14,7 @@
 
 """Sweeps on a Dask LocalCluster (resumable after a kill) and the report's statistics."""
 
+from dataclasses import asdict
 import itertools
 import json
 import os
@@ -28,8 +29,10 @@ import numpy as np
 from probdis_ros.experiments.report import (
     bootstrap_ci,
     claims,
+    claims_markdown,
     family_table,
     markdown_table,
+    paired_markdown,
     summarise,
     write_report,
 )
@@ -127,6 +130,66 @@ def test_a_sweep_of_another_seed_is_refused_in_the_same_directory(tmp_path):
         run_sweep(keys, tmp_path, workers=1, rrt={'iterations': 400})
 
 
+def test_an_episode_that_raises_is_recorded_as_errored_and_the_sweep_goes_on(
+        tmp_path, monkeypatch, capsys):
+    from dask.distributed import LocalCluster
+    from probdis_ros.sim import episode
+
+    real = episode.run_episode
+
+    def fails_in_world_1(world, method, seed=0, **kwargs):
+        if seed == keys[1].world_seed:
+            raise RuntimeError('the planner fell over')
+        return real(world, method, seed=seed, **kwargs)
+
+    keys = episode_keys(['2d'], [1], 3, [Method.parse('epsilon:0.2')], 0)
+    monkeypatch.setattr(episode, 'run_episode', fails_in_world_1)
+    # workers in this process (threads), so that they run the patched episode
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                      dashboard_address=None) as cluster:
+        report = run_sweep(keys, tmp_path, scheduler=cluster.scheduler_address)
+    assert report.ran == 3
+    records = {r['world']: r for r in read_episodes(tmp_path / EPISODES_FILE)}
+    assert sorted(records) == [0, 1, 2]
+    failed = records[1]
+    assert failed['error'] == 'RuntimeError: the planner fell over'
+    assert (failed['success'], failed['paths'], failed['method'], failed['world_seed'],
+            failed['id']) == (False, 0, 'epsilon:0.2', keys[1].world_seed, keys[1].name)
+    assert 'error' not in records[0] and 'error' not in records[2]
+    warning = [line for line in capsys.readouterr().err.splitlines() if 'warning' in line]
+    assert len(warning) == 1 and keys[1].name in warning[0] and 'fell over' in warning[0]
+    # the report counts it as unsolved and says it errored
+    summary = write_report(tmp_path)
+    cell = summary['cells'][0]
+    solved = sum(records[w]['success'] for w in (0, 2))
+    assert (cell['episodes'], cell['errored'], cell['success']) == (3, 1, solved / 3)
+    assert summary['errored'] == [{'id': keys[1].name,
+                                   'error': 'RuntimeError: the planner fell over'}]
+    assert '1 of 3 episodes errored (counted as unsolved' in \
+        (tmp_path / 'summary.md').read_text()
+    # resumed: the errored episode is done, nothing runs again
+    assert run_sweep(keys, tmp_path, workers=1).ran == 0
+
+
+def test_a_record_of_the_bare_informed_of_before_is_not_taken_for_todays_default(tmp_path):
+    """Records labelled ``informed`` ran an older default: a resumed sweep runs it anew."""
+    from probdis_ros.planning.informed import DEFAULT_IDEAS
+
+    informed = Method.parse('informed')
+    assert str(informed) == f'informed:{DEFAULT_IDEAS}' and Method.parse(str(informed)) == \
+        informed
+    keys = episode_keys(['2d'], [1], 1, [informed], 0)
+    old = {**asdict(keys[0]), 'method': 'informed', 'id': '2d/1/0/informed',
+           'world_seed': keys[0].world_seed, 'success': True, 'paths': 1, 'failures': 0,
+           'empty_plans': 0, 'max_paths': 2, 'plan_times_s': [0.01], 'wall_s': 1.0}
+    (tmp_path / EPISODES_FILE).write_text(json.dumps(old) + '\n')
+    assert run_sweep(keys, tmp_path, max_paths=2, workers=1).ran == 1
+    methods = [r['method'] for r in read_episodes(tmp_path / EPISODES_FILE)]
+    assert methods == ['informed', f'informed:{DEFAULT_IDEAS}']
+    # and the report keeps the two variants apart
+    assert {c['method'] for c in write_report(tmp_path)['cells']} == set(methods)
+
+
 def test_family_worlds_are_seeds_from_the_sweep_seed_and_go_world_by_world():
     methods = [Method.parse('probabilistic'), Method.parse('epsilon:0.2')]
     keys = family_keys(['open_box', 'clutter'], 3, methods, 1000)
@@ -174,6 +237,20 @@ def test_the_bootstrap_interval_matches_the_exact_bootstrap_distribution():
     assert bootstrap_ci(values, samples=20000) == pytest.approx(exact)
     assert bootstrap_ci(np.ones(7)) == (1.0, 1.0)
     assert bootstrap_ci(values) == bootstrap_ci(values)          # seeded
+
+
+def test_the_summary_does_not_depend_on_the_order_the_workers_finished_in():
+    """Shuffle the records (as two workers may finish them): the same intervals."""
+    rng = np.random.default_rng(7)
+    records = [{'setting': '2d', 'obstacles': 1, 'method': method, 'max_paths': 20,
+                'world': w, 'world_seed': 1000 + w, 'success': bool(rng.random() < 0.6),
+                'paths': int(rng.integers(1, 21)), 'plan_times_s': [0.01], 'wall_s': 1.0,
+                'empty_plans': 0}
+               for w in range(30) for method in ('probabilistic', 'epsilon:0.2')]
+    summary = summarise(records)
+    for seed in range(3):
+        shuffled = [records[k] for k in np.random.default_rng(seed).permutation(len(records))]
+        assert summarise(shuffled) == summary
 
 
 def test_success_within_n_paths_counts_only_successes_after_at_most_n_paths():
@@ -278,6 +355,62 @@ def test_the_claims_compare_with_the_best_baseline_and_find_ranking_flips():
     assert hard['best_by_obstacles'] == {1: 'hard:0.02', 10: 'hard:0.01'}
     assert hard['best_changes'] and abs(hard['largest_gap'] - 0.25) < 1e-12
     assert [f['family'] for f in verdicts['sensitivity']] == ['hard']   # one epsilon value
+
+
+def test_the_comparison_with_the_paper_is_paired_by_world():
+    """
+    Check the paired comparison on worlds where the answer is known.
+
+    The paper's method solves worlds 0-9 in 5 paths.  ``epsilon:0.2`` solves those in 3
+    paths and worlds 10-19 too, in 15: its mean over its own successes (9) is above the
+    paper's (5), over the worlds both solved below (3 against 5); it succeeds in 10 more
+    worlds of 20.  ``hard:0.01`` solves exactly the paper's worlds: a difference of 0 in
+    every world, so the paired interval is 0-0 (unpaired, both rates' intervals are wide).
+    """
+    def record(method, world, success, paths):
+        return {'setting': '2d', 'obstacles': 10, 'method': method, 'max_paths': 20,
+                'world': world, 'world_seed': 500 + world, 'success': success,
+                'paths': paths if success else 20, 'plan_times_s': [0.01], 'wall_s': 1.0,
+                'empty_plans': 0}
+
+    records = [record('probabilistic', w, w < 10, 5) for w in range(20)]
+    records += [record('epsilon:0.2', w, True, 3 if w < 10 else 15) for w in range(20)]
+    records += [record('hard:0.01', w, w < 10, 7) for w in range(20)]
+    records.reverse()                       # the order the file holds them in does not matter
+    summary = summarise(records)
+    rows = {r['method']: r for r in summary['paired']}
+    assert set(rows) == {'epsilon:0.2', 'hard:0.01'}
+    eps, hard = rows['epsilon:0.2'], rows['hard:0.01']
+    cells = {c['method']: c for c in summary['cells']}
+    assert cells['epsilon:0.2']['mean_paths_successful'] == 9.0     # its own successes
+    assert (eps['worlds'], eps['both_solved'], eps['mean_paths_both_solved']) == \
+        (20, 10, [3.0, 5.0])
+    assert (eps['success'], eps['success_paper'], eps['difference']) == (1.0, 0.5, 0.5)
+    # the worlds resampled: the interval of the mean of ten 1s and ten 0s
+    assert eps['difference_ci95'] == list(bootstrap_ci(np.array([0.0] * 10 + [1.0] * 10)))
+    assert 0.25 < eps['difference_ci95'][0] < 0.5 < eps['difference_ci95'][1] < 0.75
+    assert (hard['difference'], hard['difference_ci95']) == (0.0, [0.0, 0.0])
+    assert cells['hard:0.01']['ci95'][0] < 0.4 and cells['hard:0.01']['ci95'][1] > 0.6
+    # the claims' row for the best baseline carries its paired comparison
+    verdicts = claims(summary)
+    beat = verdicts['beats_every_baseline'][0]
+    assert beat['best_baseline'] == 'epsilon:0.2' and beat['paired'] == eps
+    text = claims_markdown(verdicts)
+    low, high = eps['difference_ci95']
+    assert f'| -0.50 ({-high:+.2f} to {-low:+.2f}) | 5.0 / 3.0 |' in text
+    table = paired_markdown(summary, families=False)
+    assert f'| 2d | 10 | epsilon:0.2 | 20 | 1.00 / 0.50 | +0.50 ({low:+.2f} to {high:+.2f}) ' \
+        '| 10 | 3.0 / 5.0 |' in table
+    assert '| 2d | 10 | hard:0.01 | 20 | 0.50 / 0.50 | +0.00 (+0.00 to +0.00) | 10 | 7.0 / 5.0 |' \
+        in table
+    assert paired_markdown(summary, families=True) == ''
+    # families pair the same way, in their own table
+    family = [{**r, 'family': 'open_box', 'setting': '3d-orient', 'obstacles': 0}
+              for r in records]
+    rows = summarise(family)['paired']
+    assert [(r['family'], r['method'], r['difference']) for r in rows] == [
+        ('open_box', 'epsilon:0.2', 0.5), ('open_box', 'hard:0.01', 0.0)]
+    assert '| open_box | epsilon:0.2 | 20 |' in paired_markdown(summarise(family), True)
 
 
 def report_record(world, method='probabilistic'):

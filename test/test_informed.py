@@ -54,7 +54,7 @@ def one_failure(ideas: MapIdeas | None = None) -> FailureMap:
 # -- parsing -----------------------------------------------------------------------------
 
 @pytest.mark.parametrize('text, ideas, shown', [
-    ('informed', None, 'informed'),
+    ('informed', DEFAULT_IDEAS, f'informed:{DEFAULT_IDEAS}'),
     ('informed:b', 'b', 'informed:b'),
     ('informed:eba', 'abe', 'informed:abe'),
     (' informed:abce ', 'abce', 'informed:abce'),

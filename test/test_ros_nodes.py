@@ -152,6 +152,7 @@ def test_the_method_parameter_takes_the_planners_informed_ideas_and_refuses_the_
 
 def test_the_robot_experiment_hands_the_node_its_informed_ideas():
     from probdis_ros.planning import Method
+    from probdis_ros.planning.informed import DEFAULT_IDEAS
     from probdis_ros.ros.robot_experiment import planner_arguments
 
     def params(text):
@@ -159,7 +160,8 @@ def test_the_robot_experiment_hands_the_node_its_informed_ideas():
         return dict(arg.split(':=') for arg in args[1::2])
 
     assert params('informed:adfhi')['method'] == 'informed:adfhi'
-    assert params('informed')['method'] == 'informed'
+    # a bare informed names its (default) ideas, as its records do
+    assert params('informed')['method'] == f'informed:{DEFAULT_IDEAS}'
     assert params('hard:0.02') == {'method': 'hard', 'threshold': '0.02', 'seed': '3',
                                    'velocity_scaling': '0.2'}
     with pytest.raises(ValueError, match='--offline'):

@@ -17,14 +17,17 @@
 
 For every (setting, obstacle count, method): the success rate within n planned paths for
 n = 1..max (an episode succeeded within n if it succeeded after at most n paths), with a 95 %
-percentile-bootstrap interval over the worlds; the mean number of paths of the successful
-episodes; the planning time per path; the share of the paths that were empty plans (no
-feasible path found, the arm did not move; records older than that count are shown as
-unknown).  Written as ``success.png`` (like the paper's Fig. 4),
-``sensitivity.png`` (success at the maximum, like its Fig. 5), ``summary.json`` and
-``summary.md``.  Episodes of entanglement families (``sweep --family``) are grouped by family
-and method instead, tabled apart and drawn in ``families.png``, a panel per family; the
-figures of the settings are written only where the directory holds settings.
+percentile-bootstrap interval over the worlds (taken in world order, not the order the
+workers finished in); the mean number of paths of the successful episodes; the planning time
+per path; the share of the paths that were empty plans (no feasible path found, the arm did
+not move; records older than that count are shown as unknown).  Written as ``success.png``
+(like the paper's Fig. 4), ``sensitivity.png`` (success at the maximum, like its Fig. 5),
+``summary.json`` and ``summary.md``.  Every method is also set against the paper's
+(probabilistic) on the worlds both ran: the difference of success with a paired bootstrap
+interval, and the mean paths over the worlds both solved.  Episodes of entanglement families
+(``sweep --family``) are grouped by family and method instead, tabled apart and drawn in
+``families.png``, a panel per family; the figures of the settings are written only where the
+directory holds settings.
 """
 
 from __future__ import annotations
@@ -76,14 +79,29 @@ def success_curve(records: list[dict], max_paths: int) -> dict:
     return {'rate': rate, 'low': low, 'high': high}
 
 
-def summarise(records: list[dict]) -> dict:
-    """Group episodes by family or setting and obstacle count, and method; compute figures."""
+def world_order(record: dict) -> tuple:
+    """Return a record's place among its group's: by world index, then world seed."""
+    return (record.get('world', -1), record.get('world_seed', -1))
+
+
+def group_records(records: list[dict]) -> dict[tuple, list[dict]]:
+    """
+    Return the records by (family, setting, obstacles, method), each group sorted by world.
+
+    The file's order is the order the workers finished in; the bootstrap resamples by
+    position, so its intervals must not depend on that order.
+    """
     groups: dict[tuple, list[dict]] = defaultdict(list)
     for record in records:
         groups[(record.get('family', ''), record['setting'], record['obstacles'],
                 record['method'])].append(record)
+    return {key: sorted(group, key=world_order) for key, group in sorted(groups.items())}
+
+
+def summarise(records: list[dict]) -> dict:
+    """Group episodes by family or setting and obstacle count, and method; compute figures."""
     cells = []
-    for (family, setting, obstacles, method), group in sorted(groups.items()):
+    for (family, setting, obstacles, method), group in group_records(records).items():
         max_paths = group[0]['max_paths']
         curve = success_curve(group, max_paths)
         wins = [r['paths'] for r in group if r['success']]
@@ -94,6 +112,8 @@ def summarise(records: list[dict]) -> dict:
             'setting': setting, 'obstacles': obstacles, 'method': method,
             **({'family': family} if family else {}),
             'episodes': len(group), 'max_paths': max_paths,
+            # episodes that raised (sweep records their error): counted as unsolved
+            'errored': sum('error' in r for r in group),
             'success': curve['rate'][-1], 'ci95': [curve['low'][-1], curve['high'][-1]],
             'curve': curve,
             'mean_paths_successful': statistics.fmean(wins) if wins else None,
@@ -101,9 +121,79 @@ def summarise(records: list[dict]) -> dict:
             'empty_plan_share': sum(r['empty_plans'] for r in counted) / paths
             if paths and len(counted) == len(group) else None,
             'episode_wall_s_mean': statistics.fmean(r['wall_s'] for r in group)})
-    return {'cells': cells, 'episodes': len(records),
+    errored = [r for r in records if 'error' in r]
+    return {'cells': cells, 'episodes': len(records), 'paired': paired_rows(records),
+            'errored': [{'id': r.get('id', '?'), 'error': r['error']} for r in errored],
             'bootstrap': {'samples': BOOTSTRAP_SAMPLES, 'seed': BOOTSTRAP_SEED,
                           'level': 0.95}}
+
+
+#: The paper's method, against which the paired comparisons are made.
+PAPER_METHOD = 'probabilistic'
+
+
+def paired(ours: list[dict], theirs: list[dict]) -> dict | None:
+    """
+    Compare a method's episodes (theirs) with the paper's (ours) on the worlds both ran.
+
+    Per world, the difference of success (1, 0 or -1); its mean with a paired 95 %
+    percentile-bootstrap interval (the worlds resampled, as :func:`bootstrap_ci`); and the
+    mean paths of each over the worlds both solved (each method's own successes are
+    different worlds).  None if no world is in both (records without a world index pair
+    with nothing).
+    """
+    mine = {world_order(r): r for r in ours if 'world' in r}
+    other = {world_order(r): r for r in theirs if 'world' in r}
+    common = sorted(set(mine) & set(other))
+    if not common:
+        return None
+    diffs = np.array([float(other[w]['success']) - float(mine[w]['success']) for w in common])
+    both = [w for w in common if mine[w]['success'] and other[w]['success']]
+    ci = bootstrap_ci(diffs)
+    return {'worlds': len(common),
+            'success': statistics.fmean(float(other[w]['success']) for w in common),
+            'success_paper': statistics.fmean(float(mine[w]['success']) for w in common),
+            'difference': float(diffs.mean()), 'difference_ci95': [ci[0], ci[1]],
+            'both_solved': len(both),
+            'mean_paths_both_solved': [statistics.fmean(other[w]['paths'] for w in both),
+                                       statistics.fmean(mine[w]['paths'] for w in both)]
+            if both else None}
+
+
+def paired_rows(records: list[dict]) -> list[dict]:
+    """Return every method against the paper's, paired by world, per family or setting cell."""
+    groups = group_records(records)
+    rows = []
+    for (family, setting, obstacles, method), group in groups.items():
+        ours = groups.get((family, setting, obstacles, PAPER_METHOD))
+        if method == PAPER_METHOD or ours is None:
+            continue
+        comparison = paired(ours, group)
+        if comparison is not None:
+            rows.append({'setting': setting, 'obstacles': obstacles, 'method': method,
+                         **({'family': family} if family else {}), **comparison})
+    return rows
+
+
+def paired_markdown(summary: dict, families: bool) -> str:
+    """Return the paired comparisons with the paper's method (families' or settings') ('')."""
+    rows = [r for r in summary.get('paired', []) if bool(r.get('family')) == families]
+    if not rows:
+        return ''
+    where = '| family |' if families else '| setting | obstacles |'
+    lines = [f'{where} method | worlds of both | success: method / probabilistic '
+             '| difference, method - probabilistic (paired 95 % CI) | worlds both solved '
+             '| mean paths on the worlds both solved: method / probabilistic |',
+             '| --- ' * (8 if not families else 7) + '|']
+    for r in rows:
+        cell = f'| {r["family"]} |' if families else f'| {r["setting"]} | {r["obstacles"]} |'
+        low, high = r['difference_ci95']
+        both = r['mean_paths_both_solved']
+        paths = '-' if both is None else f'{both[0]:.1f} / {both[1]:.1f}'
+        lines.append(f'{cell} {r["method"]} | {r["worlds"]} | {r["success"]:.2f} / '
+                     f'{r["success_paper"]:.2f} | {r["difference"]:+.2f} ({low:+.2f} to '
+                     f'{high:+.2f}) | {r["both_solved"]} | {paths} |')
+    return '\n'.join(lines) + '\n'
 
 
 def _settings(summary: dict) -> dict:
@@ -154,7 +244,20 @@ def markdown_tables(summary: dict) -> str:
         parts.append(markdown_table(summary))
     if family_cells(summary):
         parts.append(family_table(summary))
+    if summary.get('errored'):
+        parts.append(errors_markdown(summary))
     return '\n'.join(parts)
+
+
+def errors_markdown(summary: dict) -> str:
+    """Return how many episodes errored (counted as unsolved above), and which ('' if none)."""
+    errored = summary.get('errored') or []
+    if not errored:
+        return ''
+    lines = [f'{len(errored)} of {summary["episodes"]} episodes errored (counted as unsolved '
+             'in the tables):', '']
+    lines += [f'- {e["id"]}: {e["error"]}' for e in errored]
+    return '\n'.join(lines) + '\n'
 
 
 def markdown_table(summary: dict) -> str:
@@ -185,6 +288,8 @@ def claims(summary: dict) -> dict:
     cells: dict[tuple, dict[str, dict]] = defaultdict(dict)
     for c in _settings(summary)['cells']:
         cells[(c['setting'], c['obstacles'])][c['method']] = c
+    pairs = {(r['setting'], r['obstacles'], r['method']): r
+             for r in summary.get('paired', []) if not r.get('family')}
     beats = []
     for (setting, obstacles), methods in sorted(cells.items()):
         ours = methods.get('probabilistic')
@@ -196,7 +301,9 @@ def claims(summary: dict) -> dict:
                       'probabilistic': ours['success'], 'ci95': ours['ci95'],
                       'best_baseline': best, 'baseline': others[best]['success'],
                       'at_least_as_good': ours['success'] >= others[best]['success'],
-                      'clear': ours['ci95'][0] > others[best]['success']})
+                      'clear': ours['ci95'][0] > others[best]['success'],
+                      # the same worlds: the baseline's paired difference from ours
+                      'paired': pairs.get((setting, obstacles, best))})
     families: dict[tuple, dict[int, dict[str, float]]] = defaultdict(lambda: defaultdict(dict))
     for (setting, obstacles), methods in cells.items():
         for method, c in methods.items():
@@ -224,12 +331,24 @@ def claims(summary: dict) -> dict:
 def claims_markdown(verdicts: dict) -> str:
     """Return the claims as two Markdown tables."""
     lines = ['| setting | obstacles | probabilistic (95 % CI) | best baseline | its rate '
-             '| probabilistic >= every baseline |', '| --- | --- | --- | --- | --- | --- |']
+             '| probabilistic >= every baseline '
+             '| probabilistic - baseline, same worlds (paired 95 % CI) '
+             '| mean paths on the worlds both solved: probabilistic / baseline |',
+             '| --- | --- | --- | --- | --- | --- | --- | --- |']
     for b in verdicts['beats_every_baseline']:
         verdict = ('yes, clearly' if b['clear'] else 'yes') if b['at_least_as_good'] else 'NO'
+        pair = b.get('paired')
+        if pair is None:
+            difference = paths = '-'
+        else:       # the pair is baseline - probabilistic: turned round (+ 0.0: no -0.00)
+            low, high = pair['difference_ci95']
+            difference = (f'{-pair["difference"] + 0.0:+.2f} ({-high + 0.0:+.2f} to '
+                          f'{-low + 0.0:+.2f})')
+            both = pair['mean_paths_both_solved']
+            paths = '-' if both is None else f'{both[1]:.1f} / {both[0]:.1f}'
         lines.append(f'| {b["setting"]} | {b["obstacles"]} | {b["probabilistic"]:.2f} '
                      f'({b["ci95"][0]:.2f}-{b["ci95"][1]:.2f}) | {b["best_baseline"]} | '
-                     f'{b["baseline"]:.2f} | {verdict} |')
+                     f'{b["baseline"]:.2f} | {verdict} | {difference} | {paths} |')
     lines += ['', '| setting | method | best value per obstacle count | ranking flips '
               '| largest gap between values |', '| --- | --- | --- | --- | --- |']
     for s in verdicts['sensitivity']:
@@ -305,13 +424,19 @@ def write_report(directory: str | Path) -> dict:
     text = []
     if settings['cells']:
         text += [markdown_table(summary), claims_markdown(summary['claims'])]
+        if paired_markdown(summary, families=False):
+            text.append(paired_markdown(summary, families=False))
         plot_success_curves(settings, directory / 'success.png')
         plot_sensitivity(settings, directory / 'sensitivity.png')
         files += ['success.png', 'sensitivity.png']
     if family_cells(summary):
         text.append(family_table(summary))
+        if paired_markdown(summary, families=True):
+            text.append(paired_markdown(summary, families=True))
         plot_family_curves(summary, directory / 'families.png')
         files.append('families.png')
+    if summary['errored']:
+        text.append(errors_markdown(summary))
     summary['files'] = [*files, 'summary.json', 'summary.md']
     # (a report killed midway leaves the previous summary or the new one, never half)
     write_atomically(directory / 'summary.json', json.dumps(summary, indent=1) + '\n',

@@ -23,7 +23,7 @@ were empty plans (a planner that found no feasible path, so the arm did not move
 episodes are appended to ``episodes.jsonl`` at once (one JSON object per line, flushed and
 synced); a rerun of the same command reads the file, drops a line cut short by a crash, and
 runs only what is missing, so an interrupted sweep loses at most the episodes that were
-running.
+running.  An episode that raises is recorded with its error (unsolved) and the sweep goes on.
 
 Entanglement families (``--family``, :mod:`probdis_ros.sim.families`) run the same way; their
 world ``w`` of a sweep of seed ``s`` is the family world of seed ``s + w``, so ``--seed 0
@@ -100,11 +100,30 @@ def family_keys(families: Iterable[str], worlds: int, methods: Iterable[Method],
 
 
 def run_episode_record(key: EpisodeKey, max_paths: int, rrt: dict | None = None) -> dict:
-    """Run one episode (in a worker) and return its JSON record."""
+    """
+    Run one episode (in a worker) and return its JSON record.
+
+    An episode that raises does not stop the sweep: its record says so (``error``: the
+    exception, ``success`` false, no paths) and counts as unsolved in the report; a rerun
+    of the same command keeps it (it is done), another ``--out`` runs it again.
+    """
+    cpu0 = time.process_time()
+    t0 = time.perf_counter()
+    try:
+        return _episode_record(key, max_paths, rrt, cpu0)
+    except Exception as err:        # any failure of the episode: recorded, not raised
+        return {**asdict(key), 'id': key.name, 'world_seed': key.world_seed,
+                'success': False, 'paths': 0, 'failures': 0, 'empty_plans': 0,
+                'max_paths': max_paths, 'plan_times_s': [], **({'rrt': rrt} if rrt else {}),
+                'wall_s': time.perf_counter() - t0, 'cpu_s': time.process_time() - cpu0,
+                'error': f'{type(err).__name__}: {err}'}
+
+
+def _episode_record(key: EpisodeKey, max_paths: int, rrt: dict | None, cpu0: float) -> dict:
+    """Run one episode and return its record (exceptions go to run_episode_record)."""
     from probdis_ros.planning.prob_rrt import RRTSettings
     from probdis_ros.sim.episode import run_episode
 
-    cpu0 = time.process_time()
     method = Method.parse(key.method)
     world = _world(key.family or key.setting, key.obstacles, key.world_seed)
     t0 = time.perf_counter()
@@ -226,9 +245,14 @@ def run_sweep(keys: list[EpisodeKey], out: Path, max_paths: int = 20,
                                  pure=False) for key in todo]
         with path.open('a') as stream:
             for finished, future in enumerate(as_completed(futures), start=1):
-                stream.write(json.dumps(future.result()) + '\n')
+                record = future.result()
+                stream.write(json.dumps(record) + '\n')
                 stream.flush()
                 os.fsync(stream.fileno())
+                if 'error' in record:
+                    # on a line of its own (over the progress bar, which is redrawn)
+                    print(f'\rwarning: episode {record["id"]} failed ({record["error"]}); '
+                          'recorded as unsolved', file=sys.stderr, flush=True)
                 if progress:
                     progress(finished, len(todo), time.monotonic() - t0)
     finally:

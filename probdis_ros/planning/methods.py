@@ -21,7 +21,8 @@ planner node: :meth:`Method.for_node`).  A :class:`Method` knows the C_FAIL of t
 map its loop learns (``probabilistic:C`` sets it; the others use the default) and builds
 its planner: ProbRRT with an objective, or Epsilon, and its map and loop (the paper's, but
 for ``informed``: :mod:`probdis_ros.planning.informed`, whose ideas are letters, e.g.
-``informed:ab``).
+``informed:ab``).  A bare ``informed`` is the default ideas, and its string names them
+(``informed:`` and ``DEFAULT_IDEAS``), so records never mix it with an older default.
 """
 
 from __future__ import annotations
@@ -81,7 +82,13 @@ class Method:
     name: str
     value: float | None = None
     c_hard: float | None = None     # hard only: C_FAIL of its forbidden regions
-    ideas: str | None = None        # informed only: its ideas' letters (None: the default)
+    ideas: str | None = None        # informed only: its ideas' letters (None: the default's)
+
+    def __post_init__(self) -> None:
+        # a bare informed is today's default ideas, and says so (str: informed:IDEAS): the
+        # default changed over time, and a record of an older default is another variant
+        if self.name == 'informed' and self.ideas is None:
+            object.__setattr__(self, 'ideas', DEFAULT_IDEAS)
 
     @classmethod
     def parse(cls, text: str) -> Method:
@@ -147,7 +154,7 @@ class Method:
 
     def __str__(self) -> str:
         if self.name == 'informed':
-            return self.name if self.ideas is None else f'{self.name}:{self.ideas}'
+            return f'{self.name}:{self.idea_letters}'
         if self.value is None:
             return self.name
         text = f'{self.name}:{_text(self.value)}'
