@@ -153,7 +153,7 @@ class DetectorSettings:
     speed_allowance: float = 0.1    # ceilings and onset_gap grow by this x commanded speed [s]
     onset_window: float = 1.0       # the rise is traced back at most this far [s]
     onset_rate: float = 0.1         # L1 gap growth [rad/s] over 0.1 s that is still a rise
-    echo_time: float = 0.5          # seconds of lag-free motion that reveal an echo; 0: off
+    echo_time: float = 0.5          # seconds of motion as the driver sends it: an echo; 0: off
     echo_speed: float = 0.05        # commanded L1 speed [rad/s] that counts as moving
     driver_tau: float = DRIVER_FILTER_TAU  # the driver's command filter [s], for the echo
     torque_ceiling: float = 0.0     # external torque [Nm] at a joint that is a block; 0: off
@@ -201,13 +201,16 @@ class SentCommand:
         self.filter = FirstOrderFilter(tau, period)
         self.filter.reset(path.at(0.0))
         self._values = [self.filter.value.copy()]
+        self._array = np.array(self._values)
 
     def at(self, times: np.ndarray) -> np.ndarray:
         """Return the commands sent at times [s from the path's start] (N, n)."""
         steps = np.maximum(np.asarray(times, dtype=float), 0.0) / self.period
         while len(self._values) < steps.max() + 2:
             self._values.append(self.filter(self.path.at(len(self._values) * self.period)))
-        values = np.array(self._values)
+        if len(self._array) < len(self._values):
+            self._array = np.array(self._values)
+        values = self._array
         k = np.floor(steps).astype(int)
         w = (steps - k)[:, None]
         return values[k] * (1.0 - w) + values[k + 1] * w
