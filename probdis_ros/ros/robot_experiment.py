@@ -117,7 +117,7 @@ def offline_run(scenario: str, method: Method, run: int, velocity_scaling: float
     episode = run_physics_episode(scenario, str(method), seed=run, run_settings=settings)
     summary = episode.summary()
     return {'success': summary['success'], 'paths': summary['paths'],
-            'failures': summary['failures'], 'bag': None,
+            'failures': summary['failures'], 'bag': None, 'message': summary['message'],
             'peak_contact_force_n': summary['peak_contact_force_n'],
             'sim_time_s': summary['sim_time_s']}
 
@@ -199,7 +199,7 @@ def run_robot_experiment(out: Path, scenarios: list[str], methods: list[Method],
                       'success': result['success'], 'paths': result['paths'],
                       'failures': result['failures'], 'wall_s': time.monotonic() - t0,
                       'bag': result['bag'], 'offline': offline, 'detection': detection}
-            for name in ('peak_contact_force_n', 'sim_time_s'):
+            for name in ('peak_contact_force_n', 'sim_time_s', 'message'):
                 if name in result:
                     record[name] = result[name]
             if result['bag'] and sim_time:
