@@ -387,7 +387,9 @@ class Run:
         age = now - self.measured_at
         if self.phase.active and age > self.settings.state_timeout:
             self.finish(State.STOPPED, f'joint states stopped arriving: none for {age:.2f} s '
-                                       f'(state_timeout)')
+                                       f'(state_timeout); has the driver stopped? (its log '
+                                       f'says why: its command guard ends the FRI session on '
+                                       f'a joint faster than its URDF limit)')
 
     def stop(self, reason: str = 'stopped on request') -> None:
         """End the run now, decelerating the arm to rest (or hold it where it is)."""
