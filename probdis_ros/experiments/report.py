@@ -424,15 +424,17 @@ def write_report(directory: str | Path) -> dict:
     text = []
     if settings['cells']:
         text += [markdown_table(summary), claims_markdown(summary['claims'])]
-        if paired_markdown(summary, families=False):
-            text.append(paired_markdown(summary, families=False))
+        pairs = paired_markdown(summary, families=False)
+        if pairs:
+            text.append(pairs)
         plot_success_curves(settings, directory / 'success.png')
         plot_sensitivity(settings, directory / 'sensitivity.png')
         files += ['success.png', 'sensitivity.png']
     if family_cells(summary):
         text.append(family_table(summary))
-        if paired_markdown(summary, families=True):
-            text.append(paired_markdown(summary, families=True))
+        pairs = paired_markdown(summary, families=True)
+        if pairs:
+            text.append(pairs)
         plot_family_curves(summary, directory / 'families.png')
         files.append('families.png')
     if summary['errored']:
