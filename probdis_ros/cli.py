@@ -315,7 +315,8 @@ def cmd_experiment_robot(args: argparse.Namespace) -> int:
                                    args.velocity_scaling, args.timeout, say,
                                    engine=args.engine, sim_time=args.sim_time,
                                    real_time_factor=args.real_time_factor,
-                                   offline=args.offline, detection=detection)
+                                   offline=args.offline, detection=detection,
+                                   jtc_start=args.jtc_start)
     # the runs asked for only: a DIR may hold more runs (an earlier --runs), other scenes
     # or methods
     wanted = {(s, str(m), r) for s in scenarios for m in methods for r in range(runs)}
@@ -360,6 +361,10 @@ def cmd_sim(args: argparse.Namespace) -> int:
     """Run one simulated disentangling episode."""
     if args.engine == 'physics':
         return _sim_physics(args)
+    from probdis_ros.motion.jtc import DEFAULT_JTC_START
+
+    if args.jtc_start != DEFAULT_JTC_START:
+        raise UsageError('--jtc-start needs --engine physics (the kinematic sweeps run no JTC)')
 
     from probdis_ros.planning import Method
     from probdis_ros.resources import scenario_path
@@ -452,8 +457,11 @@ def _sim_physics(args: argparse.Namespace) -> int:
                              f'{", ".join(FAMILIES)}')
         scene = draw_family_scene(args.family, args.seed or 0)
     method = Method.resolve(args.method, args.threshold, args.epsilon)
+    from probdis_ros.run import RunSettings
+
     episode = run_physics_episode(scene, method, seed=args.seed or 0,
-                                  max_paths=args.max_paths)
+                                  max_paths=args.max_paths,
+                                  run_settings=RunSettings(jtc_start=args.jtc_start))
     summary = episode.summary()
     # the result first: a plot that cannot be written after all must not lose the episode
     if args.json:
@@ -463,7 +471,9 @@ def _sim_physics(args: argparse.Namespace) -> int:
         print(f'{episode.scene.name}: {method}: {outcome} after {episode.paths} path(s), '
               f'{len(episode.failures)} failure(s) learned; {summary["sim_time_s"]} s '
               f'simulated in {summary["wall_time_s"]} s ({summary["real_time_factor"]}x real '
-              f'time), peak contact force {summary["peak_contact_force_n"]} N')
+              f'time), peak contact force {summary["peak_contact_force_n"]} N; fastest '
+              f"command change {summary['command_speed_peak']:.2f} x a joint's velocity "
+              f'limit (JTC), {summary["sent_speed_peak"]:.2f} x (after the driver\'s filter)')
     if args.plot:
         arm = iiwa_arm()
         failures = [(np.array(f['x']), np.array(f['v'])) for f in episode.failures]
@@ -629,7 +639,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     if args.plot:
         _check_output(args.plot, '--plot')
     result = run_demo(world, args.timeout, quiet=args.json, engine=args.engine,
-                      sim_time=args.sim_time)
+                      sim_time=args.sim_time, jtc_start=args.jtc_start)
     summary = {k: result[k] for k in ('success', 'paths', 'failures', 'replan_latency_s')}
     if args.json:
         _print_json(summary)
@@ -749,6 +759,16 @@ def _publish_bag(args: argparse.Namespace) -> int:
     return 130 if result.interrupted else 0
 
 
+def _jtc_start_argument(parser: argparse.ArgumentParser, where: str = '') -> None:
+    from probdis_ros.motion.jtc import DEFAULT_JTC_START, JTC_STARTS
+
+    parser.add_argument('--jtc-start', choices=JTC_STARTS, default=DEFAULT_JTC_START,
+                        help="where the mock's joint_trajectory_controller starts each new "
+                        'command, as the planner models it: the measured state, or its last '
+                        f'command (interpolate_from_desired_state: true){where} (default: '
+                        f'{DEFAULT_JTC_START})')
+
+
 def _positive_int(text: str) -> int:
     value = int(text)
     if value < 1:
@@ -850,6 +870,7 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument('--engine', choices=('kinematic', 'physics'), default='kinematic',
                      help="the simulated arm: the kinematic one of the paper's settings, or "
                      'MuJoCo in joint impedance through JTC (with --scene or --family)')
+    _jtc_start_argument(sim, ' (with --engine physics)')
     sim.add_argument('--scene', help='with --engine physics: a scene file, or the name of one '
                      'in config/scenes/ (default demo_hook)')
     sim.set_defaults(handler=cmd_sim)
@@ -884,6 +905,7 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument('--plot', metavar='OUT.png',
                       help='draw the scene with the flange path and the blocks of the run')
     demo.add_argument('--timeout', type=float, default=300.0, help='seconds for the run')
+    _jtc_start_argument(demo)
     demo.add_argument('--json', action='store_true',
                       help='print {"success", "paths", "failures", "replan_latency_s"}')
     demo.set_defaults(handler=cmd_demo)
@@ -986,6 +1008,7 @@ def build_parser() -> argparse.ArgumentParser:
     robot.add_argument('--detection', action='append', metavar='NAME=VALUE',
                        help='a detector threshold for every run, e.g. gap_ceiling=0 '
                        '(repeatable; README "Parameters")')
+    _jtc_start_argument(robot)
     robot.add_argument('--json', action='store_true', help='print every run as JSON')
     robot.set_defaults(handler=cmd_experiment_robot)
     return parser

@@ -55,14 +55,21 @@ before the next planner call; the host drops the result of the one under way).
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from enum import Enum
 import threading
 
 import numpy as np
 from probdis_ros.model.arms import Arm
 from probdis_ros.motion.detector import BlockDetector, DetectorSettings, Verdict
-from probdis_ros.motion.jtc import CONTROLLER_RATE, JtcTrajectory, TrajectoryCommand
+from probdis_ros.motion.jtc import (
+    CONTROLLER_RATE,
+    DEFAULT_JTC_START,
+    JTC_STARTS,
+    JtcTrajectory,
+    taken_trajectory,
+    TrajectoryCommand,
+)
 from probdis_ros.motion.profiles import (
     DEFAULT_ACCELERATION,
     DEFAULT_JERK,
@@ -70,6 +77,7 @@ from probdis_ros.motion.profiles import (
     Motion,
     MotionLimits,
     stop,
+    time_parameterize,
 )
 from probdis_ros.motion.state_check import JUMP_SPEED, LIMIT_TOLERANCE
 from probdis_ros.planning.disentangle import Disentangler, State
@@ -118,6 +126,12 @@ class Phase(str, Enum):
 #: the URDF's limit.  Impacts on rigid obstacles add spikes beyond that: near clutter the
 #: default 0.2 keeps a wide margin.
 MAX_VELOCITY_SCALING = 0.7
+#: With a desired start, a retreat first brings JTC's command back from where it pressed in to
+#: where the arm is, at this fraction of the velocity limits (the arm, held there, does not
+#: move with it), then retreats at velocity_scaling: the spring is released within about
+#: 0.2 s instead of over the slow retreat (during which a pressed arm slid off and snapped
+#: past the driver's guard on the physics mock).  0: no release edge.
+RELEASE_SCALING = MAX_VELOCITY_SCALING
 
 
 @dataclass
@@ -131,6 +145,10 @@ class RunSettings:
     state_timeout: float = 0.5                         # joint states older than this stop
     replan_tolerance: float = 0.05                     # L1 [rad] between plan start and arm
     detection: DetectorSettings = field(default_factory=DetectorSettings)
+    # where JTC starts a new command: 'measured' (interpolate_from_desired_state false, the
+    # default) or 'desired' (true: from its last command; every command is then planned
+    # from that desired state, and one that starts pressed in waits for the gap to count)
+    jtc_start: str = DEFAULT_JTC_START
 
     def __post_init__(self) -> None:
         """Refuse values a run cannot use, naming them."""
@@ -144,6 +162,9 @@ class RunSettings:
         for name in ('acceleration_limit', 'jerk_limit', 'state_timeout', 'replan_tolerance'):
             if not getattr(self, name) > 0:
                 raise ValueError(f'{name} must be positive, got {getattr(self, name)}')
+        if self.jtc_start not in JTC_STARTS:
+            raise ValueError(f'jtc_start must be one of {", ".join(JTC_STARTS)}, got '
+                             f'{self.jtc_start!r}')
 
     def limits(self, arm: Arm) -> MotionLimits:
         """Return the motion limits: the arm's velocities, these accelerations and scalings."""
@@ -252,6 +273,9 @@ class Run:
         self.measured_at = -np.inf
         self.detector: BlockDetector | None = None
         self.trajectory: JtcTrajectory | None = None     # the last command, as JTC runs it
+        # when it was sent (JTC took it then): the detector moves the trajectory's taken_at on
+        # for an arm that begins late, which is no delay of JTC's own command
+        self.sent_at = -np.inf
         self.following = False                           # the last state was on it
         self.motion: Motion | None = None                # the path or retreat being run
         self.plan_pending = False
@@ -272,15 +296,20 @@ class Run:
     # -- events ------------------------------------------------------------------------
 
     def start(self, now: float, config: np.ndarray, velocity: np.ndarray | None = None,
-              running: JtcTrajectory | None = None) -> None:
+              running: JtcTrajectory | None = None, running_sent_at: float | None = None
+              ) -> None:
         """
         Start from config (and velocity), the newest measured state (at the goal: done).
 
-        ``running`` is the host's last command where the arm may still be running it (the
-        end of the last run): where it comes to rest is no motion of anything else.
+        ``running`` is the host's last command (sent at ``running_sent_at``) where the arm
+        may still be running it (the end of the last run): where it comes to rest is no
+        motion of anything else; with a desired start JTC's last command, which it holds.
         """
         self._now = now
         self.trajectory = running
+        self.sent_at = -np.inf
+        if running is not None:
+            self.sent_at = running.taken_at if running_sent_at is None else running_sent_at
         self.outcome, self.message = '', 'running'
         problem = usable(self.arm, config)
         if problem:
@@ -422,6 +451,83 @@ class Run:
         self._emit(PlanFrom(np.asarray(config, dtype=float).copy()))
         self._emit(StatusChanged())
 
+    @property
+    def _desired_start(self) -> bool:
+        return self.settings.jtc_start == 'desired'
+
+    def _origin(self, now: float) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+        """
+        Return the state (q, v, a) JTC starts a command sent at now from.
+
+        The measured state (no acceleration), or with ``jtc_start`` 'desired' the last command
+        as the run models it (the measured state before any command).
+        """
+        last = self._last_command(now)
+        if last is not None:
+            q, v, a = last
+            return np.clip(q, self.arm.lower, self.arm.upper), v, a
+        return self.measured, self.measured_velocity, None
+
+    def _last_command(self, now: float) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """Return JTC's command at now as the run models it, with a desired start (else None)."""
+        if not self._desired_start or self.trajectory is None:
+            return None
+        return self.trajectory.sample(now - self.sent_at)
+
+    def _held(self) -> bool:
+        """
+        Tell whether the arm is held by what blocked it, short of JTC's command.
+
+        After a block, until a command has come back to the arm (a free arm that lags its
+        command is not held: bringing the command back to it would pull it back).
+        """
+        if self.detector is not None:
+            return self.detector.pressed
+        return self.pressed
+
+    def _pressed_in(self, q0: np.ndarray) -> bool:
+        """Tell whether a desired start q0 is pressed in past a held arm (beyond d_dist)."""
+        return bool(self._desired_start and RELEASE_SCALING and self._held() and
+                    np.abs(q0 - self.measured).sum() > self.settings.detection.d_dist)
+
+    def _plan_origin(self, now: float) -> np.ndarray:
+        """Return where the next path is planned from: where its command will start."""
+        q0 = self._origin(now)[0]
+        return self.measured if self._pressed_in(q0) else q0
+
+    def _motion(self, path: np.ndarray, now: float) -> Motion:
+        """
+        Return the motion of path (its first point: where the command starts) as JTC runs it.
+
+        A desired start pressed in past the arm first brings the command back to the arm at
+        RELEASE_SCALING; the path then starts where the arm is (its first edge the release's
+        too, so that a block is placed on the path's edges).
+        """
+        q0, v0, a0 = self._origin(now)
+        if not self._pressed_in(q0):
+            return from_state(q0, v0, path, self.limits, a=a0)
+        release = self._release(q0, v0, a0)
+        path = np.array(path, dtype=float)
+        path[0] = self.measured
+        rest = time_parameterize(path, self.limits)
+        shift = release.duration
+        return Motion(times=np.concatenate([release.times, shift + rest.times[1:]]),
+                      positions=np.vstack([release.positions, rest.positions[1:]]),
+                      velocities=np.vstack([release.velocities, rest.velocities[1:]]),
+                      accelerations=np.vstack([release.accelerations, rest.accelerations[1:]]),
+                      via_times=shift + rest.via_times,
+                      overload=release.overload, period=release.period)
+
+    def _message(self, motion: Motion) -> TrajectoryCommand:
+        """Return a motion's message: with a desired start, from its start at time 0."""
+        return motion.command_from_start if self._desired_start else motion.command
+
+    def _release(self, q0: np.ndarray, v0: np.ndarray | None, a0: np.ndarray | None) -> Motion:
+        """Return the command's way from q0 (pressed in, braked first) back to the arm."""
+        fast = replace(self.limits, velocity_scaling=max(RELEASE_SCALING,
+                                                         self.limits.velocity_scaling))
+        return from_state(q0, v0, np.vstack([q0, self.measured]), fast, a=a0)
+
     def _arm_ready(self) -> bool:
         return self.phase is Phase.PLANNING or (
             self.phase is Phase.RETREATING and self.retreat_done_at is not None)
@@ -430,42 +536,59 @@ class Run:
         if self.pending_path is None or not self._arm_ready():
             return
         path, self.pending_path = self.pending_path, None
-        if np.abs(path[0] - self.measured).sum() > self.settings.replan_tolerance:
+        planned_at = self._time()
+        q0 = self._plan_origin(planned_at)
+        if np.abs(path[0] - q0).sum() > self.settings.replan_tolerance:
             # the arm is not where this plan begins (its retreat was blocked): a first edge
-            # from here would be uncosted, so plan again from where the arm is
+            # from here would be uncosted, so plan again from where the arm is (or, desired
+            # start, from where JTC's command is)
             self.loop.withdraw()
             self.plan_pending = True
             self.phase = Phase.PLANNING
-            self._emit(PlanFrom(self.measured.copy()))
+            self._emit(PlanFrom(q0.copy()))
             return
         if not self.arm.within_limits(path).all():
             self.finish(State.STOPPED, 'planned path leaves the joint limits; not sent')
             return
-        motion = from_state(self.measured, self.measured_velocity, path, self.limits)
+        motion = self._motion(path, planned_at)
         now = self._time()
         if self.block_time is not None:
             waited = (self.retreat_sent - self.block_time) + max(
                 0.0, now - (self.retreat_done_at or now))
             self.latencies.append(waited)
             self.block_time = None
-        self._send(motion, path)
+        self._send(motion, path, planned_at if self._desired_start else None)
         self.phase = Phase.EXECUTING
         self.retreat_done_at = None
         self._emit(StatusChanged())
 
-    def _send(self, motion: Motion, path: np.ndarray | None = None) -> None:
-        """Send a motion and watch it as JTC runs it, from the measured state now."""
-        command = motion.command
-        now = self._time()
+    def _send(self, motion: Motion, path: np.ndarray | None = None,
+              planned_at: float | None = None) -> None:
+        """
+        Send a motion and watch it as JTC runs it, from the measured state now.
+
+        With a desired start, from JTC's command at ``planned_at``, where the motion was
+        planned from (the clock moves on while it is timed: the command must start where the
+        motion does).
+        """
+        command = self._message(motion)
+        now = self._time() if planned_at is None else planned_at
         self._emit(Send(command, path, now))
         self.motion = motion
-        self.trajectory = JtcTrajectory(command, self.measured, self.measured_velocity, now)
+        last = self._last_command(now)
+        self.trajectory = taken_trajectory(command, now, self.measured, self.measured_velocity,
+                                           last, self.period)
+        self.sent_at = now
+        pressed_start = None
+        if last is not None and self._pressed_in(np.clip(last[0], self.arm.lower,
+                                                         self.arm.upper)):
+            pressed_start = (last[0], self.measured.copy())
         self.following = True
         # a path from a free arm must move it; one from an arm pressed against something
         # (its retreat blocked) may be blocked at once
-        expect = path is not None and not self.pressed
+        expect = path is not None and not self.pressed and pressed_start is None
         self.detector = BlockDetector(self.trajectory, now, self.settings.detection,
-                                      expect_motion=expect)
+                                      expect_motion=expect, pressed_start=pressed_start)
         self.rest_at = None
 
     def _completed(self, config: np.ndarray) -> None:
@@ -474,7 +597,7 @@ class Run:
             self.finish(self.loop.state, 'goal reached' if self.loop.state is State.SUCCEEDED
                         else 'max_paths reached')
         else:
-            self._plan_from(config)
+            self._plan_from(self._plan_origin(self._time()) if self._desired_start else config)
 
     def _onset(self, detector: BlockDetector, now: float
                ) -> tuple[np.ndarray, int, np.ndarray]:
@@ -515,9 +638,11 @@ class Run:
                             'q': fmap.orientations[-1].tolist(), 'segment': segment,
                             'config': config.tolist(), 'why': detector.reason}))
         self.block_time = now
-        # from where the arm is, through where the block began, back the way it came
-        retreat = np.vstack([self.measured, back])
-        self._send(from_state(self.measured, self.measured_velocity, retreat, self.limits))
+        # from where the arm is (desired start: where JTC's command is), through where the
+        # block began, back the way it came
+        at = self._time()
+        self._send(self._motion(np.vstack([self._plan_origin(at), back]), at), None,
+                   at if self._desired_start else None)
         self.retreat_sent = self._time()
         self.phase = Phase.RETREATING
         self.retreat_done_at = None
@@ -567,7 +692,9 @@ class Run:
         """
         Decelerate to rest from the arm's state now, within the limits.
 
-        JTC starts any new command from the measured state, so the stop starts there, carried
+        With a desired start JTC starts the stop from its last command, so it brakes that, and
+        a command pressed in past the arm (a block) is then brought back to the arm, or JTC
+        would hold it pressed in.  Otherwise JTC starts it from the measured state, carried
         on to now (a stop built from a state even one period old would first pull a moving
         arm back): at its measured velocity over up to one and a half periods; beyond, by what
         the running command did since, while the arm followed it (that also carries its
@@ -581,7 +708,25 @@ class Run:
         age = max(now - self.measured_at, 0.0)
         fresh = age <= self.settings.state_timeout
         delay = self.settings.detection.motion_delay
-        if self.trajectory is not None and not fresh:
+        last = self._last_command(now)
+        held = None if last is None else np.clip(last[0], self.arm.lower, self.arm.upper)
+        release = None
+        if held is not None and fresh and self._pressed_in(held):
+            try:
+                release = self._release(held, possible(self.arm, last[1]), last[2])
+            except (RuntimeError, ValueError):      # brake it below at least
+                release = None
+        if release is not None:
+            command = self._message(release)
+            self._emit(Send(command, None, now))
+            self.trajectory = taken_trajectory(command, now, last[0], last[1], last,
+                                               self.period)
+            self.sent_at = now
+            self.following = True
+            return
+        if last is not None:
+            q, v, a = last        # JTC starts the stop from its last command: brake that
+        elif self.trajectory is not None and not fresh:
             q, v, a = self.trajectory.sample(now - self.trajectory.taken_at - delay)
         elif self.measured is not None:
             v = self.measured_velocity
@@ -600,12 +745,13 @@ class Run:
         q = np.clip(q, self.arm.lower, self.arm.upper)
         v = possible(self.arm, v) if v is not None else 0 * q
         try:
-            command = stop(q, v, a, self.limits).command
+            command = self._message(stop(q, v, a, self.limits))
         except (RuntimeError, ValueError):      # never left without a command to stop
-            command = stop(q, 0 * q, 0 * q, self.limits).command   # hold where it is
+            command = self._message(stop(q, 0 * q, 0 * q, self.limits))   # hold there
         self._emit(Send(command, None, now))
         # what the arm runs from now on: a later stop without fresh states starts from it
-        self.trajectory = JtcTrajectory(command, q, v, now)
+        self.trajectory = taken_trajectory(command, now, q, v, last, self.period)
+        self.sent_at = now
         self.following = True
 
     def status(self) -> dict:

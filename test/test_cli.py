@@ -206,6 +206,7 @@ def test_nan_negative_and_empty_values_are_refused_naming_the_flag(probdis, tmp_
     for args, command, text in [
             (('fk', 'nan', '0', '0', '0', '0', '0', '0'), 'fk', 'got nan'),
             (('sim', '--seed', '-1'), 'sim', '--seed must be a number >= 0, got -1'),
+            (('sim', '--jtc-start', 'desired'), 'sim', '--jtc-start needs --engine physics'),
             (('bench', 'physics', '--seconds', '-1'), 'bench physics',
              '--seconds must be a positive number, got -1'),
             (('demo', '--timeout', '0'), 'demo', '--timeout must be a positive number, got 0'),
@@ -282,7 +283,9 @@ def test_the_robot_experiment_refuses_a_folder_of_runs_with_other_settings(probd
             '--methods', 'probabilistic', '--out', str(tmp_path))
     for extra, text in [(('--detection', 'gap_ceiling=0.6'),
                          "detection {}, not {'gap_ceiling': 0.6}"),
-                        (('--velocity-scaling', '0.5'), 'velocity_scaling 0.2, not 0.5')]:
+                        (('--velocity-scaling', '0.5'), 'velocity_scaling 0.2, not 0.5'),
+                        # runs from before the setting was kept started from the measured state
+                        (('--jtc-start', 'desired'), "jtc_start 'measured', not 'desired'")]:
         one_line_error(probdis(*args, *extra, check=False), 'experiment robot',
                        f'{runs} holds runs of another experiment ({text})')
     assert runs.read_text() == json.dumps(record) + '\n'
@@ -296,7 +299,7 @@ def test_an_offline_run_that_fails_is_tried_again_offline(tmp_path, monkeypatch,
 
     calls = []
 
-    def flaky(scenario, method, run, velocity_scaling, detection):
+    def flaky(scenario, method, run, velocity_scaling, detection, jtc_start):
         calls.append((scenario, str(method), run))
         if len(calls) == 1:
             raise RuntimeError('the simulation did not start')
@@ -349,7 +352,7 @@ def test_a_robot_run_of_the_bare_informed_of_before_is_run_again(
     (tmp_path / 'robot_runs.jsonl').write_text(json.dumps(old) + '\n')
     calls = []
 
-    def offline(scenario, method, run, velocity_scaling, detection):
+    def offline(scenario, method, run, velocity_scaling, detection, jtc_start):
         calls.append((scenario, str(method), run))
         return {'success': True, 'paths': 2, 'failures': 1, 'bag': None}
 

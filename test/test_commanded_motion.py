@@ -155,6 +155,50 @@ def test_an_arm_that_moved_and_then_stopped_is_blocked_even_when_motion_was_expe
     assert verdict is Verdict.BLOCKED
 
 
+def pressed_retreat():
+    """Return a retreat from a command pressed in past the arm (held at M), and M."""
+    held = Q1.copy()
+    # pressed on along the motion from Q0 (L1 0.38, past the ceiling 0.3)
+    pressed = held + np.array([0.2, 0.1, 0.0, 0.08, 0.0, 0.0, 0.0])
+    motion = from_state(pressed, None, np.array([pressed, Q0]), SETTINGS.limits(ARM))
+    jtc = JtcTrajectory(motion.command, pressed, np.zeros(7), 0.0, np.zeros(7), -0.01)
+    return jtc, held
+
+
+def held_until_back(jtc, settings, held, behind=False):
+    """Return the arm: held where it pressed until its command comes back, then following."""
+    sign = np.sign(jtc.before[0] - held)
+
+    def arm(t):
+        command = jtc.sample(t - settings.motion_delay)[0]
+        q = np.where(sign > 0, np.minimum(command, held), np.maximum(command, held))
+        return held if behind else np.where(sign == 0, command, q)
+    return arm
+
+
+@pytest.mark.parametrize('pressed, verdict', [(False, Verdict.BLOCKED), (True, Verdict.DONE)])
+def test_a_command_that_starts_pressed_in_waits_for_it_to_come_back(pressed, verdict):
+    # a desired start (interpolate_from_desired_state) right after a block: the retreat
+    # starts at the pressed-in setpoint, the arm cannot follow it until it has come back
+    settings = DetectorSettings()
+    jtc, held = pressed_retreat()
+    detector = BlockDetector(jtc, 0.0, settings,
+                             pressed_start=(jtc.before[0], held) if pressed else None)
+    _, seen = judge(detector, held_until_back(jtc, settings, held), jtc.duration + 2.0)
+    assert seen is verdict
+    assert not pressed or detector.released_at is not None
+
+
+def test_a_pressed_in_retreat_that_is_blocked_behind_is_seen_once_it_has_come_back():
+    settings = DetectorSettings()
+    jtc, held = pressed_retreat()
+    detector = BlockDetector(jtc, 0.0, settings, pressed_start=(jtc.before[0], held))
+    when, seen = judge(detector, held_until_back(jtc, settings, held, behind=True),
+                       jtc.duration + 2.0)
+    assert seen is Verdict.BLOCKED and detector.released_at is not None
+    assert when < jtc.duration
+
+
 # ------------------------------------------------------------------ the run learns nothing
 
 
@@ -177,6 +221,24 @@ def run_from(q0=Q0, goal=Q1) -> Run:
 
 def learned(run) -> list:
     return [a for a in run.actions if isinstance(a, Learned)]
+
+
+def test_a_path_that_begins_with_a_release_places_a_block_on_its_own_edges():
+    # desired start after a blocked retreat: the command, pressed in past the arm, first
+    # comes back to it; a block on the path must still be placed on the path's edges (the
+    # release counted as an edge of its own once put the block one edge on, and the retreat
+    # then ran forward to a via point not reached)
+    loop = Disentangler(ARM, Planner(), Q1, max_paths=5, seed=0, goal_tolerance=0.04)
+    run = Run(ARM, loop, RunSettings(jtc_start='desired'), clock=lambda: 0.0)
+    pressed = Q0 + np.array([0.2, 0.1, 0.0, 0.08, 0.0, 0.0, 0.0])
+    held = from_state(pressed, None, np.array([pressed, pressed]), SETTINGS.limits(ARM))
+    run.start(0.0, Q0, None, JtcTrajectory(held.command, pressed, np.zeros(7), 0.0), 0.0)
+    run.pressed = True                        # its last motion ended blocked
+    path = np.array([Q0, Q0 + 0.3, Q1])
+    motion = run._motion(path, 0.0)
+    assert motion.positions[0] == pytest.approx(pressed)       # from where JTC's command is
+    assert len(motion.via_times) == len(path)
+    assert [motion.segment_at(t) for t in (0.0, motion.via_times[1] + 0.01)] == [0, 1]
 
 
 def test_a_path_the_arm_never_follows_stops_the_run_and_learns_nothing():

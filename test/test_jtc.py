@@ -138,3 +138,47 @@ def test_the_driver_filter_is_first_order_with_its_time_constant():
         out = f(np.ones(1))
     assert out == pytest.approx([1 - np.exp(-0.04 / 0.04)])
     assert FirstOrderFilter(tau=0.0)(np.array([3.0])) == pytest.approx([3.0])
+
+
+def test_a_desired_start_continues_the_last_command_where_a_measured_start_steps_back():
+    # commanded at 1 rad/s, the arm 0.2 rad behind at 0.5 s; a new message: at 2.0 in 0.5 s
+    ramp = one_joint([1.0], [1.0], [1.0], [0.0])
+    hold = one_joint([0.5], [2.0], [0.0], [0.0])
+    steps = {}
+    for start in ('measured', 'desired'):
+        jtc = TrajectoryController(0.01, start)
+        jtc.receive(ramp)
+        commands = [jtc.update(0.01 * k, np.zeros(1), np.ones(1)) for k in range(50)]
+        jtc.receive(hold)
+        commands.append(jtc.update(0.5, np.array([0.3]), np.ones(1)))
+        steps[start] = float(np.max(np.abs(np.diff(np.array(commands)[:, 0]))))
+    assert steps['measured'] > 0.18          # back to the lagging arm in one period
+    # on from 0.5 at about 1 rad/s: JTC stamps the point before (the command for now) at the
+    # previous update, so a first point later than one period ahead adds one period's motion
+    assert steps['desired'] < 0.021
+
+
+def test_a_desired_start_hits_the_first_point_at_its_time():
+    # the point before is the last command, stamped one period before the take
+    traj = JtcTrajectory(one_joint([0.01], [0.02], [1.0], [0.0]), np.array([0.01]),
+                         np.array([1.0]), 0.0, np.zeros(1), -0.01)
+    assert traj.sample(0.01)[0] == pytest.approx([0.02])
+    assert traj.sample(-0.01)[0] == pytest.approx([0.01])
+    assert traj.sample(0.0)[0] == pytest.approx([0.015])   # at 1 rad/s between them
+
+
+def test_an_unknown_start_is_refused():
+    with pytest.raises(ValueError, match='start'):
+        TrajectoryController(0.01, 'commanded')
+
+
+@pytest.mark.parametrize('start, first', [('measured', 0.3), ('desired', 0.0)])
+def test_the_first_message_after_activation_starts_from_the_activation_hold(start, first):
+    # JTC holds the measured position at activation (0.0 here): with a desired start that
+    # hold is its last command, and the first message starts from it, not from the arm
+    # (which has sagged to 0.3 since)
+    jtc = TrajectoryController(0.01, start)
+    assert jtc.update(0.0, np.zeros(1), np.zeros(1)) == pytest.approx([0.0])
+    jtc.receive(one_joint([1.0], [1.0], [0.0], [0.0]))
+    jtc.update(0.01, np.array([0.3]), np.zeros(1))
+    assert jtc.trajectory.before[0] == pytest.approx([first])

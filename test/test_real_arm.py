@@ -20,12 +20,17 @@ from dataclasses import replace
 import numpy as np
 from probdis_ros.model import iiwa_arm
 from probdis_ros.motion.detector import Verdict
-from probdis_ros.motion.jtc import DRIVER_FILTER_TAU, JtcTrajectory, OLD_DRIVER_FILTER_TAU
+from probdis_ros.motion.jtc import (
+    DRIVER_FILTER_TAU,
+    JTC_STARTS,
+    JtcTrajectory,
+    OLD_DRIVER_FILTER_TAU,
+)
 from probdis_ros.physics import load_scene, measure, PhysicsIiwa, PhysicsSettings
 from probdis_ros.physics.episode import run_physics_episode
 from probdis_ros.physics.simulated_robot import build_robot, RobotSettings, SimulatedRobot
 from probdis_ros.planning.prob_rrt import RRTSettings
-from probdis_ros.run import ECHO_MESSAGE, RunSettings
+from probdis_ros.run import ECHO_MESSAGE, RELEASE_SCALING, RunSettings
 import pytest
 
 ARM = iiwa_arm()
@@ -140,3 +145,19 @@ def test_an_arm_that_lags_more_than_motion_delay_is_not_taken_for_an_echo():
             state = robot.joint_state()
             run.on_joint_state(state.time, state.position, state.velocity)
         assert run.message != ECHO_MESSAGE, seed
+
+
+@pytest.mark.parametrize('scene, seed, paths', [('demo_hook', 1, 6), ('robot_maze', 0, 4)])
+def test_a_desired_start_never_steps_the_command_where_a_measured_start_does(
+        scene, seed, paths):
+    # JTC's default starts every new command from the measured state, so at each block its
+    # command steps back by the gap (README, "On the real arm"); from its last command
+    # (interpolate_from_desired_state) the command stays within the release's speed
+    peaks = {}
+    for start in JTC_STARTS:
+        episode = run_physics_episode(scene, 'informed', seed=seed, max_paths=paths,
+                                      run_settings=RunSettings(jtc_start=start))
+        assert episode.failures and 'driver stopped' not in episode.message
+        peaks[start] = episode.command_speed_peak, episode.sent_speed_peak
+    assert peaks['measured'][0] > 5.0 and peaks['measured'][1] > 1.5
+    assert max(peaks['desired']) <= RELEASE_SCALING + 1e-6

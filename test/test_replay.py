@@ -189,7 +189,10 @@ def test_replay_refuses_bad_bags_clearly(tmp_path):
 
 
 @pytest.mark.ros
-def test_replay_of_a_recorded_mock_run_finds_the_live_blocks(tmp_path):
+@pytest.mark.parametrize('desired', [False, True])
+def test_replay_of_a_recorded_mock_run_finds_the_live_blocks(tmp_path, desired):
+    # desired: JTC starts each command from its last one (interpolate_from_desired_state),
+    # and the replay must start them where the live planner did
     ros = RosTest()
     try:
         ros.add(PlannerNode(context=ros.context, parameter_overrides=[
@@ -199,10 +202,14 @@ def test_replay_of_a_recorded_mock_run_finds_the_live_blocks(tmp_path):
             Parameter('velocity_scaling', value=0.7), Parameter('state_timeout', value=2.0),
             Parameter('max_paths', value=6),
             # the kinematic arm lags its command by the driver's filter alone (0.04 s)
-            Parameter('motion_delay', value=0.04)]))
+            Parameter('motion_delay', value=0.04),
+            Parameter('interpolate_from_desired_state', value=desired),
+            Parameter('controller_node', value='/mock_iiwa')]))
         env = dict(os.environ, ROS_DOMAIN_ID=str(ros.domain))
         arm = subprocess.Popen([sys.executable, '-m', 'probdis_ros.ros.mock_iiwa_node',
-                                '--ros-args', '-p', 'engine:=kinematic'], env=env)
+                                '--ros-args', '-p', 'engine:=kinematic', '-p',
+                                f'interpolate_from_desired_state:={str(desired).lower()}'],
+                               env=env)
         try:
             wait_for(lambda: ros.call('start', timeout=30).success, 30, 'start')
             wait_for(lambda: ros.status.get('state') in ('succeeded', 'gave_up', 'stopped'),
@@ -219,6 +226,7 @@ def test_replay_of_a_recorded_mock_run_finds_the_live_blocks(tmp_path):
         failures = [(t, json.loads(reader.deserialize(raw, c.msgtype).data))
                     for c, t, raw in reader.messages() if c.topic.endswith('/failures')]
         t0 = reader.start_time
+    assert live['jtc_start'] == ('desired' if desired else 'measured')
     result = replay(bag)
     assert result.success == (live['state'] == 'succeeded')
     assert result.paths == live['paths'] and len(result.blocks) == live['failures']

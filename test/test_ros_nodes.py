@@ -122,6 +122,58 @@ def test_a_second_start_is_refused(ros, tmp_path):
     assert not second.success and 'already active' in second.message
 
 
+def test_start_is_refused_while_the_controller_starts_commands_elsewhere_than_modelled(
+        ros, tmp_path):
+    # the mock plays JTC with its default (each command from the measured state); a planner
+    # that models the last command would release a block into what it hit
+    mock(ros)
+    node = planner(ros, tmp_path, interpolate_from_desired_state=True,
+                   controller_node='/mock_iiwa')
+    wait_for(lambda: node.controller_setting.value is False, 10, "the controller's setting")
+    response = ros.call('start')
+    assert not response.success and 'from its measured state' in response.message
+    assert not ros.trajectories
+    node.set_parameters([Parameter('interpolate_from_desired_state', value=False)])
+    wait_for(lambda: ros.call('start').success, 10, 'start once they agree')
+
+
+def test_a_planner_that_models_the_last_command_starts_only_once_the_controller_agrees(
+        ros, tmp_path):
+    node = planner(ros, tmp_path, interpolate_from_desired_state=True,
+                   controller_node='/lbr/joint_trajectory_controller')
+    steady_states(ros)
+    wait_for(lambda: node.measured is not None, 10, 'joint states')
+    response = ros.call('start')
+    assert not response.success and 'could not read' in response.message
+    # a controller that agrees but holds the measured position by itself on a path
+    # tolerance (the README's settings for the measured start) would be unseen
+    import rclpy
+
+    jtc = rclpy.create_node('joint_trajectory_controller', namespace='/lbr',
+                            context=ros.context)
+    jtc.declare_parameter('interpolate_from_desired_state', True)
+    jtc.declare_parameter('constraints.goal_time', 0.0)
+    for joint in JOINTS:
+        jtc.declare_parameter(f'constraints.{joint}.trajectory', 0.0)
+    ros.add(jtc)
+    wait_for(lambda: node.controller_setting.value is True, 10, "the controller's setting")
+    assert node.controller_setting.holds == {}
+    jtc.set_parameters([Parameter('constraints.lbr_A2.trajectory', value=0.3)])
+    wait_for(lambda: node.controller_setting.holds, 10, 'the new constraint')
+    response = ros.call('start')
+    assert not response.success and 'constraints.lbr_A2.trajectory 0.3' in response.message
+    jtc.set_parameters([Parameter('constraints.lbr_A2.trajectory', value=0.0)])
+    wait_for(lambda: ros.call('start').success, 10, 'start')
+
+
+def test_a_planner_that_models_the_measured_state_starts_unconfirmed(ros, tmp_path):
+    # the measured start needs no confirmation (the node warns): a controller that starts
+    # from its last command then steps back to the arm, as JTC's default does
+    planner(ros, tmp_path, controller_node='/lbr/joint_trajectory_controller')
+    steady_states(ros)
+    wait_for(lambda: ros.call('start').success, 10, 'start')
+
+
 def test_bad_goals_are_refused(ros, tmp_path):
     node = planner(ros, tmp_path)
     outside = GOAL.copy()

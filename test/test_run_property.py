@@ -27,16 +27,24 @@ velocity exceeds them, and no velocity steps.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from probdis_ros.model import iiwa_arm
 from probdis_ros.motion.detector import DetectorSettings
-from probdis_ros.motion.jtc import JtcTrajectory
+from probdis_ros.motion.jtc import JTC_STARTS, JtcTrajectory, taken_trajectory
 from probdis_ros.motion.profiles import MAX_STOP_OVERLOAD
 from probdis_ros.motion.state_check import BadJointStateError, StateCheck
 from probdis_ros.planning.disentangle import Disentangler
-from probdis_ros.run import Learned, PlanFrom, Run, RunSettings, Send, StatusChanged
+from probdis_ros.run import (
+    Learned,
+    PlanFrom,
+    RELEASE_SCALING,
+    Run,
+    RunSettings,
+    Send,
+    StatusChanged,
+)
 import pytest
 
 ARM = iiwa_arm()
@@ -79,20 +87,33 @@ class World:
     dead either) and stays there until the next command.
     """
 
-    def __init__(self, q: np.ndarray, deceleration: np.ndarray) -> None:
+    def __init__(self, q: np.ndarray, deceleration: np.ndarray,
+                 jtc_start: str = 'measured') -> None:
         self.q, self.v = q.copy(), np.zeros(7)
         self.deceleration = deceleration
+        self.jtc_start = jtc_start
         self.trajectory: JtcTrajectory | None = None
         self.blocked = False
 
     def take(self, command, t: float) -> JtcTrajectory:
-        """Take a command at t, from the arm's true state (JTC's rule)."""
-        self.trajectory = JtcTrajectory(command, self.q, self.v, t)
+        """Take a command at t, from the arm's true state or JTC's last command."""
+        last = None
+        if self.jtc_start == 'desired' and self.trajectory is not None:
+            last = self.trajectory.sample(t - self.trajectory.taken_at)
+        self.trajectory = taken_trajectory(command, t, self.q, self.v, last, PERIOD)
         self.blocked = False
         return self.trajectory
 
+    def pressed(self) -> float:
+        """Return how far (L1) JTC's command is from the arm now."""
+        if self.trajectory is None:
+            return 0.0
+        return float(np.abs(self.trajectory.sample(self.t - self.trajectory.taken_at)[0] -
+                            self.q).sum())
+
     def step(self, t: float) -> None:
         """Move to time t (one period on)."""
+        self.t = t
         if self.blocked:
             v = self.v - np.clip(self.v, -self.deceleration * PERIOD, self.deceleration * PERIOD)
             self.q = np.clip(self.q + 0.5 * (self.v + v) * PERIOD, ARM.lower, ARM.upper)
@@ -121,18 +142,21 @@ def check_command(jtc: JtcTrajectory, limits) -> None:
     assert step <= allowed, f'velocity step of {step:.3f} rad/s in {SAMPLE} s'
 
 
-def drive(seed: int, steps: int = 1500) -> dict:
+def drive(seed: int, steps: int = 1500, jtc_start: str = 'measured') -> dict:
     """Run one random interleaving; return counts of what happened."""
     rng = np.random.default_rng(seed)
     settings = RunSettings(velocity_scaling=float(rng.choice([0.2, 0.5, 0.7])),
                            state_timeout=0.1,
-                           detection=DetectorSettings(motion_delay=0.0, echo_time=0.0))
+                           detection=DetectorSettings(motion_delay=0.0, echo_time=0.0),
+                           jtc_start=jtc_start)
     limits = settings.limits(ARM)
+    if jtc_start == 'desired':       # a command pressed in past a blocked arm comes back faster
+        limits = replace(limits, velocity_scaling=max(RELEASE_SCALING, limits.velocity_scaling))
     start = np.clip(rng.uniform(ARM.lower, ARM.upper) * 0.6, ARM.lower, ARM.upper)
-    world = World(start, limits.max_acceleration)
+    world = World(start, limits.max_acceleration, jtc_start)
     gate = StateCheck(NAMES, ARM.lower, ARM.upper, ARM.velocity_limits)
     counts = {'commands': 0, 'refused': 0, 'learned': 0, 'starts': 0, 'stops': 0,
-              'ends_stopped': 0, 'paths_refused': 0, 'outcomes': set()}
+              'ends_stopped': 0, 'paths_refused': 0, 'outcomes': set(), 'left_pressed': 0}
     run: Run | None = None
     pending: list[tuple[float, Run, PlanFrom]] = []
     silent_until = -1.0
@@ -152,6 +176,9 @@ def drive(seed: int, steps: int = 1500) -> dict:
                 # stop) commands the arm to rest in the same round
                 assert sent, f'the run ended ({run.outcome}: {run.message}) without a stop'
                 counts['ends_stopped'] += 1
+                # a desired start's stop of a blocked arm brings the command back to it
+                counts['left_pressed'] += world.blocked and \
+                    world.pressed() > settings.detection.d_dist + 0.05
                 counts['paths_refused'] += 'leaves the joint limits' in run.message
             elif isinstance(action, PlanFrom):
                 pending.append((t + rng.uniform(0.0, 0.3), run, action))
@@ -217,27 +244,32 @@ def drive(seed: int, steps: int = 1500) -> dict:
         if rng.random() < 0.01 and (run is None or not run.active) and \
                 t - measured_at <= settings.state_timeout and \
                 not gate.refused_within(t, 0.1):
-            running = None
+            running, sent_at = None, None
             if run is not None:
                 counts['outcomes'].add(run.outcome)
-                # as the node does: the last command, while the arm may still run it
+                # as the node does: the last command, while the arm may still run it (with
+                # a desired start always: JTC starts the next one from it)
                 last = run.trajectory
-                if last is not None and t <= last.taken_at + last.duration + 0.5:
-                    running = last
+                if last is not None and (t <= last.taken_at + last.duration + 0.5 or
+                                         jtc_start == 'desired'):
+                    running, sent_at = last, run.sent_at
             goal = np.clip(measured + rng.uniform(-0.5, 0.5, 7), ARM.lower, ARM.upper)
             loop = Disentangler(ARM, StubPlanner(rng), goal, max_paths=8, seed=seed,
                                 goal_tolerance=0.04)
             run = Run(ARM, loop, settings, clock=lambda: clock[0])
             counts['starts'] += 1
-            run.start(measured_at, measured, velocity, running)
+            run.start(measured_at, measured, velocity, running, sent_at)
             act(run, t)
     return counts
 
 
+@pytest.mark.parametrize('jtc_start', JTC_STARTS)
 @pytest.mark.parametrize('seed', range(8))
-def test_no_command_leaves_the_limits_or_steps_in_velocity(seed):
-    counts = drive(seed)
+def test_no_command_leaves_the_limits_or_steps_in_velocity(seed, jtc_start):
+    counts = drive(seed, jtc_start=jtc_start)
     assert counts['starts'] and counts['commands'] and counts['refused']
+    if jtc_start == 'desired':
+        assert not counts['left_pressed']
 
 
 def test_the_interleavings_reach_every_kind_of_event():

@@ -47,6 +47,15 @@ joint impedance follows its command with a lag) with where it is.  The L1 gap
   controller) was started late by its controller: the command is judged from when it began
   (the trajectory's ``taken_at`` moves on by the delay), not taken for a block.
 
+A command that starts **pressed in** (``pressed_start``: JTC started it from its last
+command, ``interpolate_from_desired_state``, while the arm was held short of that command
+by more than ``d_dist``, as right after a block) cannot be followed until the command comes
+back to the arm: its gap is no block until then.  The gap tests (and the torque ceiling)
+wait until the delayed command's position has come back to the measured one at every joint
+that started pressed by more than :data:`PRESS_TOLERANCE` (each in the direction it was
+pressed), or the gap is within ``d_dist``, or the command has ended; they then start afresh
+(stall history and onset trace from that moment).
+
 Motion is judged through the noise (:func:`motion_over`): a straight line fitted to each
 joint over the window gives the motion, and the joint-state noise (estimated from the
 samples' second differences) widens the threshold by ``NOISE_SIGMAS`` standard errors, so
@@ -92,6 +101,9 @@ ECHO_STEP = 0.001
 #: alone can follow it within a tenth of a millisecond (the physics mock's A5-A7), as an
 #: echo does.
 ECHO_JOINTS = slice(0, 4)
+#: A joint whose command starts more than this [rad] beyond the measured position is pressed
+#: in; it is back within reach when its command has come to within this of the arm.
+PRESS_TOLERANCE = 0.01
 
 
 def noise_of(positions: np.ndarray) -> np.ndarray:
@@ -235,8 +247,19 @@ class BlockDetector:
 
     def __init__(self, path, start_time: float, settings: DetectorSettings | None = None,
                  gravity: Callable[[np.ndarray], np.ndarray] | None = None,
-                 expect_motion: bool = False) -> None:
+                 expect_motion: bool = False,
+                 pressed_start: tuple[np.ndarray, np.ndarray] | None = None) -> None:
         self.path = path
+        # (the command's start position, the measured one) of a command that starts pressed
+        # in: which joints, and in which direction, must come back before the gap counts
+        self._pressed: np.ndarray | None = None
+        if pressed_start is not None:
+            offset = np.asarray(pressed_start[0], dtype=float) - np.asarray(
+                pressed_start[1], dtype=float)
+            sign = np.where(np.abs(offset) > PRESS_TOLERANCE, np.sign(offset), 0.0)
+            if np.any(sign):
+                self._pressed = sign
+        self.released_at: float | None = None
         self.expect_motion = expect_motion      # a block without any motion: not executed
         self.started = not expect_motion        # the arm has been seen to move
         self.late = 0.0                         # how late the controller took the command [s]
@@ -289,6 +312,9 @@ class BlockDetector:
             return Verdict.ECHO
         if not self.started and self._begins_late(now, t):
             return Verdict.MOVING           # judged from when it began, from the next sample
+        if self._pressed is not None:
+            if not self._released(now, t, desired, measured, ended):
+                return Verdict.MOVING
         if s.torque_ceiling and self.gravity is not None and effort is not None and \
                 len(effort) == len(measured):
             self.external_torque = np.asarray(effort, dtype=float) - self.gravity(measured)
@@ -320,6 +346,31 @@ class BlockDetector:
                 return self._gap_block(f'stalled with gap {self.gap:.3f} rad (moved {motion:.3f} '
                                        f'rad in {times[-1] - times[0]:.2f} s)')
         return Verdict.MOVING
+
+    def _released(self, now: float, t: float, desired: np.ndarray, measured: np.ndarray,
+                  ended: bool) -> bool:
+        """
+        Tell whether a command that started pressed in has come back within the arm's reach.
+
+        On release the stall history and the onset trace start afresh from this sample.
+        """
+        ahead = self._pressed * (desired - measured)      # > 0: still pressed in
+        back = ahead[self._pressed != 0] <= PRESS_TOLERANCE
+        if not (back.all() or self.gap <= self.settings.d_dist or ended):
+            return False
+        self._pressed = None
+        self.released_at = now
+        self._history.clear()
+        self._history.append((now, measured.copy()))
+        self._recent.clear()
+        self._recent.append((now, self.gap, measured.copy(), self._desired(t)[1].copy()))
+        self._rising = None
+        return True
+
+    @property
+    def pressed(self) -> bool:
+        """Tell whether the command began pressed in and has not yet come back to the arm."""
+        return self._pressed is not None
 
     def moved(self) -> tuple[float, float]:
         """

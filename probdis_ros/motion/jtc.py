@@ -31,6 +31,17 @@ interface, as the lbr stack runs it:
   (the lbr stack exports position and velocity), so the first segment is at most cubic.
 * After the last point the controller holds that point.
 * Every update at time t commands the sample at ``t + period`` (one period ahead).
+
+With ``interpolate_from_desired_state: true`` (:data:`JTC_STARTS` ``'desired'``) the point
+before is instead the controller's last command (``last_commanded_state_``: the previous
+update's sample one period ahead, with its position, velocity and acceleration), stamped at
+the previous update's time (``last_commanded_time_``): one period before ``t0``.  The
+command stays continuous: the new trajectory's first sample is exactly what the message's
+first point says, and nothing steps back to the measured position.  After activation JTC
+holds the measured position, and that hold is its last command.  (Where JTC holds by itself,
+on a path or goal tolerance violation, it holds the *measured* position, and that becomes
+its last command: the planner does not see that, see the README.)  ``open_loop_control:
+true`` starts from the last command as well (JTC ORs the two).
 """
 
 from __future__ import annotations
@@ -48,6 +59,12 @@ DRIVER_FILTER_TAU = 0.04
 #: Older releases moved the command 0.1 of the way to its target each 10 ms cycle: the same
 #: first-order filter with this time constant [s].
 OLD_DRIVER_FILTER_TAU = -1.0 / (CONTROLLER_RATE * math.log(0.9))
+#: Where JTC starts a new trajectory: ``'measured'`` (``interpolate_from_desired_state:
+#: false``, the default) or ``'desired'`` (true: from its last command).
+JTC_STARTS = ('measured', 'desired')
+#: The start the planner models and the mock's controller runs unless told otherwise: it must
+#: be the real controller's (README, "On the real arm").
+DEFAULT_JTC_START = 'measured'
 
 
 @dataclass(frozen=True)
@@ -149,12 +166,16 @@ class JtcTrajectory:
     """
 
     def __init__(self, command: TrajectoryCommand, q_measured: np.ndarray,
-                 v_measured: np.ndarray | None = None, taken_at: float = 0.0) -> None:
+                 v_measured: np.ndarray | None = None, taken_at: float = 0.0,
+                 a_before: np.ndarray | None = None, before_time: float = 0.0) -> None:
         self.command = command
         self.taken_at = float(taken_at)
         self.before = (np.asarray(q_measured, dtype=float).copy(),
                        None if v_measured is None else np.asarray(v_measured, dtype=float),
-                       None)
+                       None if a_before is None else np.asarray(a_before, dtype=float))
+        # when the point before holds, relative to taken_at: 0 for the measured state, minus
+        # one period for the last command (interpolate_from_desired_state)
+        self.before_time = float(before_time)
         # times of the message's points relative to taken_at
         offset = command.stamp - self.taken_at if command.stamp > 0 else 0.0
         self.times = command.times + offset
@@ -177,7 +198,8 @@ class JtcTrajectory:
         """Return the desired (position, velocity, acceleration) t seconds after taken_at."""
         times = self.times
         if t < times[0]:
-            return interpolate(t, times[0], self.before, self._point(0))
+            b = self.before_time
+            return interpolate(t - b, times[0] - b, self.before, self._point(0))
         if t >= times[-1]:
             p = self.command.positions[-1]
             v, a = self._point(len(times) - 1)[1:]
@@ -201,6 +223,24 @@ class JtcTrajectory:
         return int(np.clip(k, 0, len(self.times) - 1))
 
 
+def taken_trajectory(command: TrajectoryCommand, now: float, q_measured: np.ndarray,
+                     v_measured: np.ndarray | None = None,
+                     last_command: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+                     period: float = 1.0 / CONTROLLER_RATE) -> JtcTrajectory:
+    """
+    Return the trajectory JTC makes of a message it takes at the update at time now.
+
+    From the measured state (``interpolate_from_desired_state`` false), or, given
+    ``last_command`` (its last command: position, velocity, acceleration), from that, stamped
+    one period before now (true).  The mock's controller, the planner's run and ``probdis
+    replay`` all start a command here.
+    """
+    if last_command is None:
+        return JtcTrajectory(command, q_measured, v_measured, now)
+    q, v, a = last_command
+    return JtcTrajectory(command, q, v, now, a, -period)
+
+
 class TrajectoryController:
     """
     JTC's update loop: takes the newest message at its next update, commands one period ahead.
@@ -209,11 +249,16 @@ class TrajectoryController:
     position, or the last point).
     """
 
-    def __init__(self, period: float = 1.0 / CONTROLLER_RATE) -> None:
+    def __init__(self, period: float = 1.0 / CONTROLLER_RATE, start: str = 'measured') -> None:
+        if start not in JTC_STARTS:
+            raise ValueError(f'start must be one of {", ".join(JTC_STARTS)}, got {start!r}')
         self.period = period
+        self.start = start
         self.trajectory: JtcTrajectory | None = None
         self._pending: TrajectoryCommand | None = None
         self._hold: np.ndarray | None = None
+        # the last command (position, velocity, acceleration), for a desired start
+        self.last: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
     def receive(self, command: TrajectoryCommand) -> None:
         """Take a new message; it replaces the running trajectory at the next update."""
@@ -223,13 +268,19 @@ class TrajectoryController:
                v_measured: np.ndarray | None = None) -> np.ndarray:
         """Return the position command of the update at time now."""
         if self._pending is not None:
-            self.trajectory = JtcTrajectory(self._pending, q_measured, v_measured, now)
+            last = self.last if self.start == 'desired' else None
+            self.trajectory = taken_trajectory(self._pending, now, q_measured, v_measured,
+                                               last, self.period)
             self._pending = None
         if self.trajectory is None:
             if self._hold is None:
                 self._hold = np.asarray(q_measured, dtype=float).copy()
+                # JTC's activation holds the measured position: its last command from then on
+                self.last = (self._hold.copy(), np.zeros_like(self._hold),
+                             np.zeros_like(self._hold))
             return self._hold.copy()
-        return self.trajectory.at(now + self.period - self.trajectory.taken_at)
+        self.last = self.trajectory.sample(now + self.period - self.trajectory.taken_at)
+        return self.last[0].copy()
 
 
 class FirstOrderFilter:

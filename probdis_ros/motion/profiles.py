@@ -175,6 +175,19 @@ class Motion:
         return TrajectoryCommand(self.times[1:], self.positions[1:], self.velocities[1:],
                                  self.accelerations[1:])
 
+    @property
+    def command_from_start(self) -> TrajectoryCommand:
+        """
+        Return the message with the start as its first point, at time 0.
+
+        For JTC with ``interpolate_from_desired_state``: it stamps its last command (the one
+        for the update that takes the message) one period early, so a message whose first
+        point comes one period on would be run slower over its first two periods; from a
+        first point at 0 (its own state) JTC's first sample, one period on, is exactly ours.
+        """
+        return TrajectoryCommand(self.times, self.positions, self.velocities,
+                                 self.accelerations)
+
     def sample(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """
         Return the planned (position, velocity, acceleration) at t.
@@ -436,7 +449,7 @@ def stop(q: np.ndarray, v: np.ndarray, a: np.ndarray, limits: MotionLimits | Non
 
 def from_state(q: np.ndarray, v: np.ndarray | None, path: np.ndarray,
                limits: MotionLimits | None = None, period: float = PERIOD,
-               still: float = 1e-3) -> Motion:
+               still: float = 1e-3, a: np.ndarray | None = None) -> Motion:
     """
     Return a path's motion from the arm's state (q, v): first brought to rest, then the path.
 
@@ -445,13 +458,18 @@ def from_state(q: np.ndarray, v: np.ndarray | None, path: np.ndarray,
     within one controller period.  Below ``still`` rad/s (L1) on every joint the arm counts
     as at rest and the path starts at q; otherwise a stop (within the limits) comes first and
     the path starts where it ends.  ``via_times`` are the path's, shifted by the stop.
+
+    ``a``: the state's acceleration, for a start from JTC's desired state (which carries
+    one; the measured state does not, and a stop from it starts at zero acceleration).
     """
     q = np.asarray(q, dtype=float)
     path = np.array(path, dtype=float)
-    if v is None or np.abs(v).sum() < still:
+    a = np.zeros_like(q) if a is None else np.asarray(a, dtype=float)
+    if (v is None or np.abs(v).sum() < still) and np.abs(a).sum() < still:
         path[0] = q
         return time_parameterize(path, limits, period)
-    brake = stop(q, np.asarray(v, dtype=float), np.zeros_like(q), limits, period)
+    v = np.zeros_like(q) if v is None else np.asarray(v, dtype=float)
+    brake = stop(q, v, a, limits, period)
     path[0] = brake.positions[-1]
     rest = time_parameterize(path, limits, period)
     shift = brake.duration

@@ -57,6 +57,10 @@ class PhysicsEpisode:
     loop: Disentangler | None = None
     message: str = ''
     commands: list = field(default_factory=list)
+    # the fastest one-period change of JTC's command and of the driver's, over the joint's
+    # velocity limit (above 1: a step the arm's controller is sent)
+    command_speed_peak: float = 0.0
+    sent_speed_peak: float = 0.0
 
     def summary(self) -> dict:
         """Return the JSON summary printed by ``probdis sim --engine physics --json``."""
@@ -66,6 +70,8 @@ class PhysicsEpisode:
                 'wall_time_s': round(self.wall_time_s, 3),
                 'real_time_factor': round(self.sim_time_s / max(self.wall_time_s, 1e-9), 1),
                 'peak_contact_force_n': round(float(self.contact_force.max(initial=0.0)), 1),
+                'command_speed_peak': round(self.command_speed_peak, 3),
+                'sent_speed_peak': round(self.sent_speed_peak, 3),
                 'plan_times_s': self.plan_times_s}
 
 
@@ -78,6 +84,9 @@ def run_physics_episode(scene: str, method: str | Method = 'probabilistic', seed
     """Disentangle a physics scene from its start to its goal; reproducible from seed."""
     wall = time.perf_counter()
     method = Method.resolve(method) if isinstance(method, str) else method
+    if robot_settings is None and run_settings is not None:
+        # JTC as the run models it
+        robot_settings = RobotSettings(jtc_start=run_settings.jtc_start)
     robot, _ = build_robot('physics', scene, robot_settings)
     scene_doc = robot.engine.scene
     arm = iiwa_arm()
@@ -128,4 +137,5 @@ def run_physics_episode(scene: str, method: str | Method = 'probabilistic', seed
         configs=np.array(configs).reshape(-1, arm.n_joints), gaps=np.array(gaps),
         contact_force=np.array(forces), plan_times_s=loop.plan_times,
         sim_time_s=robot.time, wall_time_s=time.perf_counter() - wall, scene=scene_doc,
-        loop=loop, message=run.message, commands=commands)
+        loop=loop, message=run.message, commands=commands,
+        command_speed_peak=robot.command_speed_peak, sent_speed_peak=robot.sent_speed_peak)

@@ -53,8 +53,10 @@ import numpy as np
 from probdis_ros.model.arms import Arm
 from probdis_ros.motion.jtc import (
     CONTROLLER_RATE,
+    DEFAULT_JTC_START,
     DRIVER_FILTER_TAU,
     FirstOrderFilter,
+    JTC_STARTS,
     TrajectoryCommand,
     TrajectoryController,
 )
@@ -129,6 +131,7 @@ class RobotSettings:
     echo: bool = False                      # report the command sent, not the arm (open_loop)
     guard: bool = True                      # the driver's command guard stops it on a fault
     seed: int = 0                           # noise stream
+    jtc_start: str = DEFAULT_JTC_START      # JTC's interpolate_from_desired_state: 'desired'
 
     def __post_init__(self) -> None:
         """Refuse settings that cannot run."""
@@ -137,6 +140,9 @@ class RobotSettings:
         for name in ('filter_tau', 'noise', 'latency'):
             if not getattr(self, name) >= 0:
                 raise ValueError(f'{name} must be non-negative, got {getattr(self, name)}')
+        if self.jtc_start not in JTC_STARTS:
+            raise ValueError(f'jtc_start must be one of {", ".join(JTC_STARTS)}, got '
+                             f'{self.jtc_start!r}')
 
 
 @dataclass(frozen=True)
@@ -156,7 +162,7 @@ class SimulatedRobot:
                  settings: RobotSettings | None = None) -> None:
         self.engine = engine
         self.settings = settings or RobotSettings()
-        self.controller = TrajectoryController(self.settings.period)
+        self.controller = TrajectoryController(self.settings.period, self.settings.jtc_start)
         self.filter = FirstOrderFilter(self.settings.filter_tau, self.settings.period)
         self.rng = np.random.default_rng(self.settings.seed)
         engine.reset(start)
@@ -164,9 +170,12 @@ class SimulatedRobot:
         self.commanded = engine.q.copy()      # JTC's last position command
         self._sent_before = engine.q.copy()   # the driver's command one period earlier
         self.stopped: str | None = None       # why the driver's command guard stopped it
-        if self.settings.guard:
-            from probdis_ros.model import iiwa_arm
-            self._limits = iiwa_arm()
+        from probdis_ros.model import iiwa_arm
+        self._limits = iiwa_arm()
+        # the fastest change of a joint's command in one period, over its velocity limit:
+        # JTC's output and the driver's (after its filter); above 1 the command stepped
+        self.command_speed_peak = 0.0
+        self.sent_speed_peak = 0.0
         self._reported: deque[JointStateSample] = deque()
         self._report()
 
@@ -185,11 +194,17 @@ class SimulatedRobot:
             self.engine.advance(self._held, self.settings.period)
             return
         state = self._state()       # JTC starts a new trajectory from the reported state
+        # (or, jtc_start 'desired', from its last command)
+        previous = self.commanded
         self.commanded = self.controller.update(self.engine.time, state.position,
                                                 state.velocity)
         self._sent_before = self.filter.value.copy()
         before = self.engine.q.copy()
         sent = self.filter(self.commanded)
+        self.command_speed_peak = max(self.command_speed_peak,
+                                      self._speed_over_limit(self.commanded - previous))
+        self.sent_speed_peak = max(self.sent_speed_peak,
+                                   self._speed_over_limit(sent - self._sent_before))
         self.engine.advance(sent, self.settings.period)
         if self.settings.guard:
             self.stopped = self._guard(sent, before)
@@ -197,6 +212,10 @@ class SimulatedRobot:
                 self._held = self.engine.q.copy()
                 return
         self._report()
+
+    def _speed_over_limit(self, change: np.ndarray) -> float:
+        speed = np.abs(change) / self.settings.period
+        return float(np.max(speed / self._limits.velocity_limits))
 
     def _guard(self, sent: np.ndarray, before: np.ndarray) -> str | None:
         """Return why the lbr stack's command guard refuses this period, or None."""

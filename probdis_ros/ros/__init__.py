@@ -13,3 +13,7 @@
 # limitations under the License.
 
 """ROS 2 adapters: the planner node, the mock iiwa node and their command-line clients."""
+
+#: The mock iiwa's node name: it plays joint_trajectory_controller, so the planner reads the
+#: controller's parameters there (``controller_node``).
+MOCK_NODE = 'mock_iiwa'

@@ -33,8 +33,10 @@ import tempfile
 import time
 
 import numpy as np
+from probdis_ros.motion.jtc import DEFAULT_JTC_START
 from probdis_ros.physics import load_scene
 from probdis_ros.resources import data_file, scenario_path
+from probdis_ros.ros import MOCK_NODE
 from probdis_ros.sim.worlds import load_world
 
 #: The scene of ``probdis demo`` and ``make demo``.
@@ -152,13 +154,16 @@ def world_of(world: str, engine: str) -> tuple[Path, str, np.ndarray]:
 def run_demo(world: str = DEFAULT_SCENE, timeout: float = 300.0, quiet: bool = False,
              extra_planner_args: tuple[str, ...] = (), engine: str = 'physics',
              sim_time: bool = False, real_time_factor: float = 5.0,
-             extra_mock_args: tuple[str, ...] = ()) -> dict:
+             extra_mock_args: tuple[str, ...] = (), jtc_start: str = DEFAULT_JTC_START
+             ) -> dict:
     """
     Run a disentangling against the mock iiwa; return the outcome summary.
 
     world is a physics scene (engine ``physics``) or a kinematic scenario (``kinematic``).
     With sim_time the mock runs on simulated time at real_time_factor (0: as fast as it
     can) and the planner follows its /clock; timeout stays in wall-clock seconds.
+    jtc_start: where the mock's controller starts a command, and the planner models it
+    (``interpolate_from_desired_state``: 'desired'), checked by the planner against the mock.
     """
     from probdis_ros.ros.client import PlannerClient
 
@@ -171,13 +176,15 @@ def run_demo(world: str = DEFAULT_SCENE, timeout: float = 300.0, quiet: bool = F
         world_param = 'scene' if engine == 'physics' else 'scenario'
         clock = ('-p', 'sim_time:=true', '-p', f'real_time_factor:={real_time_factor}') \
             if sim_time else ()
+        desired = ('-p', f'interpolate_from_desired_state:={str(jtc_start == "desired").lower()}')
         mock = subprocess.Popen(node_command(
             'probdis_ros.ros.mock_iiwa_node', '-p', f'engine:={engine}',
-            '-p', f'{world_param}:={path}', *clock, *extra_mock_args), env=env)
+            '-p', f'{world_param}:={path}', *clock, *desired, *extra_mock_args), env=env)
         params = str(data_file('config', 'planner.yaml'))
         planner = subprocess.Popen(node_command(
             'probdis_ros.ros.planner_node', '--params-file', params, '-p', f'goal:={goal}',
-            '-p', f'map_file:={Path(tmp) / "map.json"}',
+            '-p', f'map_file:={Path(tmp) / "map.json"}', *desired,
+            '-p', f'controller_node:=/{MOCK_NODE}',
             *(('-p', 'use_sim_time:=true') if sim_time else ()), *extra_planner_args), env=env)
         status: dict = {}
         try:

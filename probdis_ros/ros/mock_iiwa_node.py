@@ -43,12 +43,14 @@ import time
 from builtin_interfaces.msg import Time
 import numpy as np
 from probdis_ros.model import iiwa_arm
+from probdis_ros.motion.jtc import DEFAULT_JTC_START
 from probdis_ros.physics.simulated_robot import (
     build_robot,
     ENGINES,
     JointStateSample,
     RobotSettings,
 )
+from probdis_ros.ros import MOCK_NODE
 from probdis_ros.ros.markers import scene_markers
 from probdis_ros.ros.messages import command_from_msg
 from probdis_ros.ros.node_main import run_node
@@ -77,7 +79,7 @@ class MockIiwa(Node):
     """The simulated arm: a thin adapter around :class:`SimulatedRobot`."""
 
     def __init__(self, **kwargs) -> None:
-        super().__init__('mock_iiwa', **kwargs)
+        super().__init__(MOCK_NODE, **kwargs)
         p = self.declare_parameter
         p('engine', 'physics', _describe('physics (MuJoCo, joint impedance) | kinematic'))
         p('scene', 'demo_hook', _describe('physics scene file, or name in config/scenes/'))
@@ -87,6 +89,9 @@ class MockIiwa(Node):
         p('noise', 0.0, _describe('std. dev. of joint-state noise [rad]', 0.0, 0.1))
         p('latency', 0.0, _describe('delay of published joint states [s]', 0.0, 1.0))
         p('echo', False, _describe('report the commanded position (a driver in open loop)'))
+        p('interpolate_from_desired_state', DEFAULT_JTC_START == 'desired', _describe(
+            "joint_trajectory_controller's: start each new command from the last one (true) "
+            'or from the measured state (false, its default)'))
         p('object_mass_error', 0.0, _describe('real minus assumed object mass [kg]',
                                               -5.0, 5.0))
         p('sim_time', False, _describe('run on simulated time and publish /clock'))
@@ -103,7 +108,9 @@ class MockIiwa(Node):
         self.arm = iiwa_arm()
         settings = RobotSettings(period=1.0 / value('rate'), noise=value('noise'),
                                  latency=value('latency'), echo=value('echo'),
-                                 seed=value('seed'))
+                                 seed=value('seed'),
+                                 jtc_start='desired' if value('interpolate_from_desired_state')
+                                 else 'measured')
         world = value('scene') if value('engine') == 'physics' else value('scenario')
         self.robot, self.description = build_robot(
             value('engine'), world, settings, object_mass_error=value('object_mass_error'))

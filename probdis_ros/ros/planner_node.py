@@ -61,6 +61,7 @@ from probdis_ros.planning import Disentangler, Method, RRTSettings, State
 from probdis_ros.planning.disentangle import DEFAULT_MIN_RETREAT
 from probdis_ros.planning.prob_rrt import ROBOT_JOINT_MARGIN
 from probdis_ros.planning.warm_up import warm_up
+from probdis_ros.ros.controller_check import ControllerSetting
 from probdis_ros.ros.markers import markers_msg
 from probdis_ros.ros.messages import stamp_seconds, trajectory_msg
 from probdis_ros.ros.node_main import run_node
@@ -219,6 +220,15 @@ PARAMETERS = {
     'bag_dir': (os.path.join(os.path.dirname(default_map_file()), 'bags'), ParameterDescriptor(
         description='each run is recorded to a rosbag2 bag (MCAP) in this folder; '
                     'empty: no recording')),
+    'interpolate_from_desired_state': (RUN.jtc_start == 'desired', ParameterDescriptor(
+        description="joint_trajectory_controller's parameter of that name, which this must "
+                    'equal (checked through controller_node): true, JTC starts each new '
+                    'command from its last one and the command never steps; false (the '
+                    "controller's default), from the measured state, stepping back by the "
+                    'lag')),
+    'controller_node': ('/lbr/joint_trajectory_controller', ParameterDescriptor(
+        description="the controller's node, whose interpolate_from_desired_state ~/start "
+                    'checks; empty: not checked')),
     'orientation': (True, ParameterDescriptor(
         description='model the flange orientation in the failure map (3-D with orientation)')),
 }
@@ -316,6 +326,8 @@ class PlannerNode(Node):
         self.create_subscription(String, '~/instance', self._on_instance, latched)
         self.create_publisher(String, '~/instance', latched).publish(
             String(data=json.dumps(self.instance)))
+        self.controller_setting = ControllerSetting(
+            self, self.get_parameter('controller_node').value, self.joint_names)
         self.create_service(Trigger, '~/start', self._on_start)
         self.create_service(Trigger, '~/stop', self._on_stop)
         self.create_service(Trigger, '~/reset_map', self._on_reset_map)
@@ -403,7 +415,9 @@ class PlannerNode(Node):
         values = {name: self.get_parameter(name).value for name in RUN_FIELDS + DETECTOR_FIELDS}
         values.update(changes or {})
         detection = DetectorSettings(**{name: values[name] for name in DETECTOR_FIELDS})
-        return RunSettings(**{name: values[name] for name in RUN_FIELDS}, detection=detection)
+        desired = self.get_parameter('interpolate_from_desired_state').value
+        return RunSettings(**{name: values[name] for name in RUN_FIELDS}, detection=detection,
+                           jtc_start='desired' if desired else 'measured')
 
     def _check_parameters(self, params) -> SetParametersResult:
         changes = {p.name: p.value for p in params if p.name in RUN_FIELDS + DETECTOR_FIELDS}
@@ -585,6 +599,15 @@ class PlannerNode(Node):
         problem = self._goal_problem(goal)
         if problem:
             return False, f'goal parameter {problem}'
+        desired = bool(self.get_parameter('interpolate_from_desired_state').value)
+        refusal = self.controller_setting.refusal(desired)
+        if refusal:
+            return False, refusal
+        if self.controller_setting.value is None:
+            self.get_logger().warning(
+                f"could not read joint_trajectory_controller's interpolate_from_desired_state "
+                f'({self.controller_setting.problem}): make sure it is '
+                f'{str(desired).lower()}, as this planner models it')
         planner = self._make_planner()
         self.fmap.c_fail = float(self.get_parameter('c_fail').value)
         loop = Disentangler(self.arm, planner, np.asarray(goal, dtype=float), self.fmap,
@@ -593,12 +616,17 @@ class PlannerNode(Node):
                             goal_tolerance=self.get_parameter('goal_tolerance').value,
                             min_retreat=self.get_parameter('min_retreat').value)
         settings = self._run_settings()
-        running = self.run.trajectory if self.run is not None and own else None
+        # the last command, where the arm may still run it; with a desired start always: JTC
+        # holds it and starts the next command from it
+        keep = self.run is not None and (own or settings.jtc_start == 'desired')
+        running = self.run.trajectory if keep else None
+        running_sent_at = self.run.sent_at if keep else None
         self.run = Run(self.arm, loop, settings, clock=self._now)
         self.plan_future = None
         self._open_bag()
         start = self.measured.copy()
-        self._guarded(self.run.start, self.measured_at, start, self.measured_velocity, running)
+        self._guarded(self.run.start, self.measured_at, start, self.measured_velocity, running,
+                      running_sent_at)
         if self.run.outcome == 'succeeded':
             return True, f'already at the goal ({np.round(start, 3).tolist()}): nothing to do'
         return True, f'disentangling from {np.round(start, 3).tolist()}'
@@ -832,6 +860,7 @@ class PlannerNode(Node):
             self._publish_status()
         if time.monotonic() - self._graph_checked >= GRAPH_CHECK:
             self._check_graph()
+        self.controller_setting.poll()
         if self.run is None:
             return
         clock = self._clock_problem() if self.active else ''
@@ -915,7 +944,8 @@ class PlannerNode(Node):
     def status(self) -> dict:
         """Return the status document published on ~/status."""
         if self.run is not None:
-            status = {**self.run.status(), 'detection': asdict(self.run.settings.detection)}
+            status = {**self.run.status(), 'detection': asdict(self.run.settings.detection),
+                      'jtc_start': self.run.settings.jtc_start}
         else:
             status = {'state': 'idle', 'paths': 0, 'last_plan_time_s': 0.0,
                       'last_replan_latency_s': None, 'replan_latencies_s': [],

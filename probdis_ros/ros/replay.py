@@ -39,7 +39,7 @@ from pathlib import Path
 import numpy as np
 from probdis_ros.model import FailureMap, iiwa_arm
 from probdis_ros.motion.detector import BlockDetector, DetectorSettings, Verdict
-from probdis_ros.motion.jtc import JtcTrajectory
+from probdis_ros.motion.jtc import JTC_STARTS, JtcTrajectory, taken_trajectory
 from probdis_ros.motion.state_check import StateCheck, values_by_name
 from probdis_ros.planning.disentangle import failure_from_block
 from probdis_ros.ros.bag_source import Bag, BagError
@@ -200,6 +200,8 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
     ended = False              # the planner said the run is over: what follows is its stop
     status_paths: list[int] = []
     previous = None            # the state of the last status message
+    jtc_start = 'measured'     # where JTC starts a command, as the live planner modelled it
+    running = None             # the last command as JTC ran it, and when it was sent
     for message in source.messages(topics):
         t = message.stamp_ns * 1e-9 - t0
         msg = source.deserialize(message)
@@ -209,6 +211,8 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
                 known = {f.name for f in fields(DetectorSettings)}
                 recorded = {k: v for k, v in state['detection'].items() if k in known}
                 settings = result.settings = detector_settings(recorded, overrides)
+            if state.get('jtc_start') in JTC_STARTS:
+                jtc_start = state['jtc_start']
             starting = state.get('state') == 'planning' and state.get('paths') == 0
             if starting and (previous is None or previous in FINISHED or previous == 'idle'):
                 result.runs += 1
@@ -227,7 +231,14 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
             if measured is None:       # JTC starts it from the first state it reads
                 early = (t, command)
                 continue
-            timed = JtcTrajectory(command, measured, measured_velocity, t)
+            last = None
+            if jtc_start == 'desired' and running is not None:
+                last = running[0].sample(t - running[1])
+            timed = taken_trajectory(command, t, measured, measured_velocity, last)
+            running = (timed, t)
+            pressed_start = None
+            if last is not None and np.abs(last[0] - measured).sum() > settings.d_dist:
+                pressed_start = (last[0], measured.copy())
             if ended or (len(timed.points) == 2 and
                          np.abs(timed.points[1] - measured).sum() <= settings.d_dist):
                 detector, kind = None, 'hold'       # a hold or the stop that ends a run
@@ -240,8 +251,9 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
                 last_path_done = False
             # as the live run: a path from a free arm must move it (one the controller takes
             # late is judged from when it began)
-            detector = BlockDetector(timed, t, settings,
-                                     expect_motion=kind == 'path' and not pressed)
+            detector = BlockDetector(timed, t, settings, expect_motion=kind == 'path' and
+                                     not pressed and pressed_start is None,
+                                     pressed_start=pressed_start)
             continue
         # the live planner's gate, and its dating: by stamp on the recording's clock
         received, stamp = t + t0, stamp_seconds(msg)
@@ -255,8 +267,8 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
         if early is not None:
             sent, command = early
             early = None
-            detector, kind = BlockDetector(JtcTrajectory(command, q, measured_velocity, sent),
-                                           sent, settings), 'path'
+            running = (JtcTrajectory(command, q, measured_velocity, sent), sent)
+            detector, kind = BlockDetector(running[0], sent, settings), 'path'
             result.paths += 1
             result.problems.append(f'{sent:.3f} s: command before any joint state: started '
                                    f'from the first one, at {t:.3f} s')

@@ -40,6 +40,7 @@ import time
 
 import numpy as np
 from probdis_ros.experiments.sweep import Method, read_episodes
+from probdis_ros.motion.jtc import DEFAULT_JTC_START
 
 RUNS_FILE = 'robot_runs.jsonl'
 
@@ -101,7 +102,7 @@ def detection_arguments(detection: dict[str, float]) -> list[str]:
 
 
 def offline_run(scenario: str, method: Method, run: int, velocity_scaling: float,
-                detection: dict[str, float]) -> dict:
+                detection: dict[str, float], jtc_start: str = DEFAULT_JTC_START) -> dict:
     """
     Run one disentangling without DDS: the planner node's Run against JTC, filter and MuJoCo.
 
@@ -113,18 +114,20 @@ def offline_run(scenario: str, method: Method, run: int, velocity_scaling: float
     from probdis_ros.run import RunSettings
 
     settings = RunSettings(velocity_scaling=velocity_scaling,
-                           detection=DetectorSettings(**detection))
+                           detection=DetectorSettings(**detection), jtc_start=jtc_start)
     episode = run_physics_episode(scenario, str(method), seed=run, run_settings=settings)
     summary = episode.summary()
     return {'success': summary['success'], 'paths': summary['paths'],
             'failures': summary['failures'], 'bag': None, 'message': summary['message'],
             'peak_contact_force_n': summary['peak_contact_force_n'],
+            'command_speed_peak': summary['command_speed_peak'],
+            'sent_speed_peak': summary['sent_speed_peak'],
             'sim_time_s': summary['sim_time_s']}
 
 
 #: The value of a run setting (engine, velocity_scaling, offline, detection) in records
 #: written before it was kept (none: not compared).
-LEGACY_SETTINGS = {'offline': False, 'detection': {}}
+LEGACY_SETTINGS = {'offline': False, 'detection': {}, 'jtc_start': 'measured'}
 
 
 def check_settings(path: Path, records: list[dict], settings: dict) -> None:
@@ -148,18 +151,20 @@ def run_robot_experiment(out: Path, scenarios: list[str], methods: list[Method],
                          progress: Callable[[str], None] | None = None,
                          engine: str = 'physics', sim_time: bool = True,
                          real_time_factor: float = 1.0, offline: bool = False,
-                         detection: dict[str, float] | None = None) -> list[dict]:
+                         detection: dict[str, float] | None = None,
+                         jtc_start: str = DEFAULT_JTC_START) -> list[dict]:
     """
     Run what is missing of scenarios x methods x runs; return every record of DIR.
 
     scenarios are physics scenes (engine ``physics``) or kinematic scenarios; with sim_time
     the mock runs on simulated time, real_time_factor times faster than the wall clock.
     ``offline`` runs each physics scene without the nodes (:func:`offline_run`);
-    ``detection`` overrides detector thresholds (``DetectorSettings`` fields) either way.
+    ``detection`` overrides detector thresholds (``DetectorSettings`` fields) either way;
+    ``jtc_start`` is where the controller starts a command (and the planner models it).
     """
     detection = dict(detection or {})
     settings = {'engine': engine, 'velocity_scaling': velocity_scaling, 'offline': offline,
-                'detection': detection}
+                'detection': detection, 'jtc_start': jtc_start}
 
     out.mkdir(parents=True, exist_ok=True)
     path = out / RUNS_FILE
@@ -175,12 +180,13 @@ def run_robot_experiment(out: Path, scenarios: list[str], methods: list[Method],
     def one_run(scenario: str, method: Method, run: int) -> dict:
         """Run once, offline or through the nodes: a retry goes the same way."""
         if offline:     # any method: no planner node, whose parameters limit it
-            return offline_run(scenario, method, run, velocity_scaling, detection)
+            return offline_run(scenario, method, run, velocity_scaling, detection, jtc_start)
         from probdis_ros.ros.demo import run_demo
 
         args = (*planner_arguments(method, run, velocity_scaling),
                 *detection_arguments(detection), '-p', f'bag_dir:={out / "bags"}')
-        return run_demo(scenario, timeout, quiet=True, extra_planner_args=args, **world_args)
+        return run_demo(scenario, timeout, quiet=True, extra_planner_args=args,
+                        jtc_start=jtc_start, **world_args)
 
     with path.open('a') as stream:
         for number, (scenario, method, run) in enumerate(todo, start=1):
@@ -198,8 +204,10 @@ def run_robot_experiment(out: Path, scenarios: list[str], methods: list[Method],
                       'engine': engine, 'velocity_scaling': velocity_scaling,
                       'success': result['success'], 'paths': result['paths'],
                       'failures': result['failures'], 'wall_s': time.monotonic() - t0,
-                      'bag': result['bag'], 'offline': offline, 'detection': detection}
-            for name in ('peak_contact_force_n', 'sim_time_s', 'message'):
+                      'bag': result['bag'], 'offline': offline, 'detection': detection,
+                      'jtc_start': jtc_start}
+            for name in ('peak_contact_force_n', 'sim_time_s', 'message', 'command_speed_peak',
+                         'sent_speed_peak'):
                 if name in result:
                     record[name] = result[name]
             if result['bag'] and sim_time:

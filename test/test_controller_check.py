@@ -1,0 +1,111 @@
+# Copyright 2026 probdis_ros contributors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""Reading the controller's settings: answers, silence, a controller that goes mid-call."""
+
+from types import SimpleNamespace
+
+from probdis_ros.ros import controller_check
+from probdis_ros.ros.controller_check import ControllerSetting, POLL
+import pytest
+from rcl_interfaces.msg import ParameterType, ParameterValue
+
+
+class Future:
+    """A call's future, answered by the test (or never)."""
+
+    def __init__(self, name):
+        self.name, self.callbacks, self.value = name, [], None
+
+    def add_done_callback(self, callback):
+        self.callbacks.append(callback)
+
+    def answer(self, value):
+        self.value = value
+        for callback in self.callbacks:
+            callback(self)
+
+    def result(self):
+        values = [] if self.value is None else [self.value]
+        return SimpleNamespace(values=values)
+
+
+class Client:
+    """The controller node's get_parameters, as the test makes it answer."""
+
+    def __init__(self):
+        self.ready, self.calls, self.removed = True, [], []
+
+    def service_is_ready(self):
+        return self.ready
+
+    def call_async(self, request):
+        self.calls.append(Future(request.names[0]))
+        return self.calls[-1]
+
+    def remove_pending_request(self, future):
+        self.removed.append(future)
+
+
+@pytest.fixture
+def setting(monkeypatch):
+    client = Client()
+    node = SimpleNamespace(create_client=lambda *args: client)
+    clock = [100.0]
+    monkeypatch.setattr(controller_check.time, 'monotonic', lambda: clock[0])
+    return ControllerSetting(node, '/lbr/joint_trajectory_controller', ['lbr_A1']), client, clock
+
+
+def answer_all(client, values):
+    for future in list(client.calls):
+        value = values.get(future.name)
+        if isinstance(value, bool):
+            future.answer(ParameterValue(type=ParameterType.PARAMETER_BOOL, bool_value=value))
+        elif value is not None:
+            future.answer(ParameterValue(type=ParameterType.PARAMETER_DOUBLE,
+                                         double_value=value))
+        else:
+            future.answer(None)      # undeclared: the node answers nothing
+    client.calls.clear()
+
+
+def test_the_controllers_start_and_holds_are_read(setting):
+    check, client, _ = setting
+    check.poll()
+    answer_all(client, {'interpolate_from_desired_state': True,
+                        'constraints.goal_time': 0.0, 'constraints.lbr_A1.trajectory': 0.3})
+    assert check.value is True and check.holds == {'constraints.lbr_A1.trajectory': 0.3}
+    assert 'constraints.lbr_A1.trajectory 0.3' in check.refusal(True)
+    assert 'from its last command' in check.refusal(False)
+
+
+def test_a_controller_that_goes_mid_call_is_no_longer_believed(setting):
+    check, client, clock = setting
+    check.poll()
+    answer_all(client, {'interpolate_from_desired_state': True, 'open_loop_control': False,
+                        'constraints.goal_time': 0.0, 'constraints.lbr_A1.trajectory': 0.0})
+    assert check.value is True and check.refusal(True) == ''
+    clock[0] += POLL
+    check.poll()                       # asked again: the controller never answers
+    hung = list(client.calls)
+    assert len(hung) == 4
+    clock[0] += POLL
+    check.poll()                       # the hung batch is dropped, a new one asked
+    assert client.removed == hung
+    clock[0] += POLL
+    check.poll()
+    assert check.value is None and 'has not answered' in check.refusal(True)
+    for future in hung:                # late answers of a dropped batch change nothing
+        future.answer(ParameterValue(type=ParameterType.PARAMETER_BOOL, bool_value=False))
+    assert check.value is None
