@@ -519,8 +519,14 @@ class Run:
                       overload=release.overload, period=release.period)
 
     def _message(self, motion: Motion) -> TrajectoryCommand:
-        """Return a motion's message: with a desired start, from its start at time 0."""
-        return motion.command_from_start if self._desired_start else motion.command
+        """
+        Return a motion's message: from the state it was planned from, at time 0.
+
+        JTC's first sample, one period on, is the motion's there whatever it starts from;
+        the message (and so the bag) says where the motion began, so that a replay need not
+        guess which joint state the live run had read when it sent it.
+        """
+        return motion.command_from_start
 
     def _release(self, q0: np.ndarray, v0: np.ndarray | None, a0: np.ndarray | None) -> Motion:
         """Return the command's way from q0 (pressed in, braked first) back to the arm."""

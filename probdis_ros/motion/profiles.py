@@ -180,10 +180,11 @@ class Motion:
         """
         Return the message with the start as its first point, at time 0.
 
-        For JTC with ``interpolate_from_desired_state``: it stamps its last command (the one
-        for the update that takes the message) one period early, so a message whose first
-        point comes one period on would be run slower over its first two periods; from a
-        first point at 0 (its own state) JTC's first sample, one period on, is exactly ours.
+        JTC samples one period ahead, so its first sample is the motion's one period on
+        whatever it starts from: from the measured state (the default) as from its last
+        command (``interpolate_from_desired_state``, which it stamps one period early, so
+        that a message whose first point came one period on would run at half speed for
+        two periods).  And the message says where the motion began.
         """
         return TrajectoryCommand(self.times, self.positions, self.velocities,
                                  self.accelerations)
