@@ -182,3 +182,14 @@ def test_the_first_message_after_activation_starts_from_the_activation_hold(star
     jtc.receive(one_joint([1.0], [1.0], [0.0], [0.0]))
     jtc.update(0.01, np.array([0.3]), np.zeros(1))
     assert jtc.trajectory.before[0] == pytest.approx([first])
+
+
+def test_before_a_message_that_begins_at_0_the_message_start_is_what_was_desired():
+    # JTC never samples before it; the detector looks back past it (motion_delay) and must
+    # see the message's own start, not whichever state it was taken from (a replay of the
+    # bag cannot know which one the live planner had read)
+    message = one_joint([0.0, 1.0], [0.2, 1.0], [0.0, 0.0], [0.0, 0.0])
+    for taken_from in (0.0, 0.25):
+        traj = JtcTrajectory(message, np.array([taken_from]), np.zeros(1))
+        assert traj.sample(-0.05)[0] == pytest.approx([0.2])
+        assert traj.sample(0.5)[0] == pytest.approx([0.6])

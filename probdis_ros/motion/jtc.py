@@ -197,6 +197,14 @@ class JtcTrajectory:
     def sample(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Return the desired (position, velocity, acceleration) t seconds after taken_at."""
         times = self.times
+        if t < times[0] <= 0.0:
+            # a message that begins with its own start (at 0): JTC never samples before it,
+            # and the planner's detector, looking back past it, sees that start (not the state
+            # the message happened to be taken from, which a replay cannot know)
+            p = self.command.positions[0]
+            v, a = self._point(0)[1:]
+            zero = np.zeros_like(p)
+            return p.copy(), zero if v is None else v, zero if a is None else a
         if t < times[0]:
             b = self.before_time
             return interpolate(t - b, times[0] - b, self.before, self._point(0))
