@@ -204,11 +204,15 @@ def test_replay_of_a_recorded_mock_run_finds_the_live_blocks(tmp_path, desired):
             # the kinematic arm lags its command by the driver's filter alone (0.04 s)
             Parameter('motion_delay', value=0.04),
             Parameter('interpolate_from_desired_state', value=desired),
-            Parameter('controller_node', value='/mock_iiwa')]))
+            Parameter('controller_node', value='/mock_iiwa'),
+            # on the mock's clock: a mock that falls behind the wall clock on a busy machine
+            # catches up in bursts, which read as motions of something else
+            Parameter('use_sim_time', value=True)]))
         env = dict(os.environ, ROS_DOMAIN_ID=str(ros.domain))
         arm = subprocess.Popen([sys.executable, '-m', 'probdis_ros.ros.mock_iiwa_node',
                                 '--ros-args', '-p', 'engine:=kinematic', '-p',
-                                f'interpolate_from_desired_state:={str(desired).lower()}'],
+                                f'interpolate_from_desired_state:={str(desired).lower()}',
+                                '-p', 'sim_time:=true', '-p', 'real_time_factor:=1.0'],
                                env=env)
         try:
             wait_for(lambda: ros.call('start', timeout=30).success, 30, 'start')
