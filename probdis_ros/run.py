@@ -464,15 +464,20 @@ class Run:
         """
         last = self._last_command(now)
         if last is not None:
-            q, v, a = last
-            return np.clip(q, self.arm.lower, self.arm.upper), v, a
+            return last
         return self.measured, self.measured_velocity, None
 
     def _last_command(self, now: float) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-        """Return JTC's command at now as the run models it, with a desired start (else None)."""
+        """
+        Return JTC's command (q, v, a) at now as the run models it, with a desired start.
+
+        None with the measured start.  q is kept within the joint limits (a sample may pass
+        them by rounding): every command built from it must stay within them.
+        """
         if not self._desired_start or self.trajectory is None:
             return None
-        return self.trajectory.sample(now - self.sent_at)
+        q, v, a = self.trajectory.sample(now - self.sent_at)
+        return np.clip(q, self.arm.lower, self.arm.upper), v, a
 
     def _held(self) -> bool:
         """
@@ -571,11 +576,11 @@ class Run:
     def _send(self, motion: Motion, path: np.ndarray | None = None,
               planned_at: float | None = None) -> None:
         """
-        Send a motion and watch it as JTC runs it, from the measured state now.
+        Send a motion and watch it as JTC runs it.
 
-        With a desired start, from JTC's command at ``planned_at``, where the motion was
-        planned from (the clock moves on while it is timed: the command must start where the
-        motion does).
+        JTC starts it from the measured state now, or with a desired start from its command
+        at ``planned_at``, where the motion was planned from (the clock moves on while it is
+        timed: the command must start where the motion does).
         """
         command = self._message(motion)
         now = self._time() if planned_at is None else planned_at
@@ -586,8 +591,7 @@ class Run:
                                            last, self.period)
         self.sent_at = now
         pressed_start = None
-        if last is not None and self._pressed_in(np.clip(last[0], self.arm.lower,
-                                                         self.arm.upper)):
+        if last is not None and self._pressed_in(last[0]):
             pressed_start = (last[0], self.measured.copy())
         self.following = True
         # a path from a free arm must move it; one from an arm pressed against something
@@ -715,11 +719,10 @@ class Run:
         fresh = age <= self.settings.state_timeout
         delay = self.settings.detection.motion_delay
         last = self._last_command(now)
-        held = None if last is None else np.clip(last[0], self.arm.lower, self.arm.upper)
         release = None
-        if held is not None and fresh and self._pressed_in(held):
+        if last is not None and fresh and self._pressed_in(last[0]):
             try:
-                release = self._release(held, possible(self.arm, last[1]), last[2])
+                release = self._release(last[0], possible(self.arm, last[1]), last[2])
             except (RuntimeError, ValueError):      # brake it below at least
                 release = None
         if release is not None:
