@@ -30,6 +30,7 @@ whole batch of joint configurations ``(N, n_joints)`` to task space at once.  Tw
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+import copy
 from dataclasses import dataclass
 from enum import Enum
 from pathlib import Path
@@ -39,11 +40,13 @@ from probdis_ros.model.kinematics import (
     AXIS_CHAIN,
     CHAIN,
     chain_kernel,
+    lowest_heights_kernel,
     PLANAR,
     positions_kernel,
     quaternion_kernel,
     sample_positions_kernel,
 )
+from probdis_ros.model.table import collision_shapes, SHAPE_COLUMNS, Table
 
 
 class TaskSpace(str, Enum):
@@ -88,6 +91,8 @@ class Arm(ABC):
     upper: np.ndarray
     velocity_limits: np.ndarray
     task_space: TaskSpace
+    #: the table the arm stands on (:mod:`probdis_ros.model.table`); None: none is known
+    table: Table | None = None
 
     @property
     def n_joints(self) -> int:
@@ -152,6 +157,14 @@ class Arm(ABC):
     @abstractmethod
     def kernel_params(self) -> tuple:
         """Return the arm as the plain arrays the compiled edge kernels take."""
+
+    def table_params(self) -> tuple[np.ndarray, float]:
+        """Return (collision shapes, floor) as the edge kernels take them; -inf: no table."""
+        return np.zeros((0, SHAPE_COLUMNS)), -np.inf
+
+    def above_table(self, configs: np.ndarray) -> np.ndarray:
+        """Return a boolean mask of the configurations the table allows (all without one)."""
+        return np.ones(len(self.as_batch(configs)), dtype=bool)
 
 
 class PlanarArm(Arm):
@@ -241,7 +254,7 @@ class SerialChainArm(Arm):
     def __init__(self, name: str, joint_names: tuple[str, ...], joints: list[_Joint],
                  tip_offset: np.ndarray, tip_rotation: np.ndarray, lower: np.ndarray,
                  upper: np.ndarray, velocity_limits: np.ndarray,
-                 with_orientation: bool) -> None:
+                 with_orientation: bool, shapes: np.ndarray | None = None) -> None:
         self.name = name
         self.joint_names = joint_names
         self._offsets = np.array([j.offset for j in joints])
@@ -251,6 +264,8 @@ class SerialChainArm(Arm):
         self.lower, self.upper, self.velocity_limits = lower, upper, velocity_limits
         self.task_space = TaskSpace.POSE3 if with_orientation else TaskSpace.POINT3
         self._kernel_params: tuple | None = None
+        #: collision shapes of the moving links (:func:`collision_shapes`), None if unknown
+        self.shapes = shapes
 
     @classmethod
     def from_urdf(cls, urdf: str | Path, tip_frame: str,
@@ -278,7 +293,55 @@ class SerialChainArm(Arm):
         return cls(model.name, tuple(model.names[1:]), joints,
                    np.array(frame.placement.translation), np.array(frame.placement.rotation),
                    np.array(model.lowerPositionLimit), np.array(model.upperPositionLimit),
-                   np.array(model.velocityLimit), with_orientation)
+                   np.array(model.velocityLimit), with_orientation,
+                   collision_shapes(model, str(urdf)))
+
+    def on_table(self, table: Table | None) -> SerialChainArm:
+        """Return this arm standing on table (None: on none known), sharing the rest."""
+        if table is not None and self.shapes is None:
+            raise ValueError(f'{self.name}: no collision shapes known, so no table check')
+        arm = copy.copy(self)
+        arm.table = table
+        return arm
+
+    def table_params(self) -> tuple[np.ndarray, float]:
+        """Return (collision shapes, floor) as the edge kernels take them; -inf: no table."""
+        if self.table is None:
+            return super().table_params()
+        return self.shapes, float(self.table.floor)
+
+    def lowest_heights(self, configs: np.ndarray) -> np.ndarray:
+        """Return the lowest height [m] of the collision shapes and the tip, per config."""
+        if self.shapes is None:
+            raise ValueError(f'{self.name}: no collision shapes known')
+        batch = np.ascontiguousarray(self.as_batch(configs))
+        kind, codes, offsets, bases, tip_offset, _ = self.kernel_params()
+        out = np.empty(len(batch))
+        lowest_heights_kernel(batch, kind, codes, offsets, bases, tip_offset, self.shapes, out)
+        return out
+
+    def above_table(self, configs: np.ndarray) -> np.ndarray:
+        """Return a boolean mask of the configurations the table allows (all without one)."""
+        if self.table is None:
+            return super().above_table(configs)
+        return self.lowest_heights(configs) >= self.table.floor
+
+    def joint_frames(self, configs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Return the joint frames' positions (N, J, 3) and rotations (N, J, 3, 3), numpy."""
+        batch = self.as_batch(configs)
+        n = len(batch)
+        positions = np.empty((n, self.n_joints, 3))
+        rotations = np.empty((n, self.n_joints, 3, 3))
+        p = np.zeros((n, 3))
+        r = np.broadcast_to(np.eye(3), (n, 3, 3))
+        for j in range(self.n_joints):
+            p = p + r @ self._offsets[j]
+            c, s = np.cos(batch[:, j]), np.sin(batch[:, j])
+            m = self._bases[j, 0] + c[:, None, None] * self._bases[j, 1] + \
+                s[:, None, None] * self._bases[j, 2]
+            r = r @ m
+            positions[:, j], rotations[:, j] = p, r
+        return positions, rotations
 
     def kernel_params(self) -> tuple:
         """

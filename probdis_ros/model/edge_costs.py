@@ -56,6 +56,24 @@ def _batch(arm: Arm, sources: np.ndarray, target: np.ndarray, base, limits):
     return sources, target, np.array(base), limits
 
 
+def edge_above_table(arm: Arm, start: np.ndarray, end: np.ndarray,
+                     delta: float = DEFAULT_DELTA) -> bool:
+    """
+    Tell whether the table lets the arm move along the edge (True without a table).
+
+    At the edge's points (every delta, as it is costed) no part of the arm may be below the
+    table's floor, nor lower than at the start (an arm near the table may leave upwards):
+    the rule of the compiled kernels (``_ground``), point by point with numpy.
+    """
+    if arm.table is None:
+        return True
+    points, _ = edge_points(start, end, delta)
+    if not len(points):
+        return True
+    heights = arm.lowest_heights(np.vstack([start, points]))
+    return bool(heights[1:].min() >= min(arm.table.floor, heights[0]))
+
+
 class EdgeCoster:
     """Cost of straight joint-space edges under a fixed failure map (compiled)."""
 
@@ -88,6 +106,7 @@ class EdgeCoster:
             (self.c_fail, 1.0 / self.terms.reach ** 2), bool(arm.task_space.has_orientation),
             bool(prune))
         self._arm = arm.kernel_params()
+        self._table = arm.table_params()
         self._terms = (float(self.terms.length_weight), float(self.terms.risk_weight),
                        float(self.terms.cap), P_MAX)
 
@@ -97,8 +116,8 @@ class EdgeCoster:
         return type(self).costs is EdgeCoster.costs and type(self).cheapest is EdgeCoster.cheapest
 
     def kernel_args(self) -> tuple:
-        """Return delta, the terms, the arm and the failures as the kernels take them."""
-        return (self.delta, *self._terms, *self._arm, *self._failures)
+        """Return delta, the terms, the arm, its table and the failures, for the kernels."""
+        return (self.delta, *self._terms, *self._arm, *self._table, *self._failures)
 
     def costs(self, sources: np.ndarray, target: np.ndarray, toward: bool = True,
               base: np.ndarray | float | None = None,
@@ -112,7 +131,7 @@ class EdgeCoster:
         sources, target, base, limits = _batch(self.arm, sources, target, base, limits)
         out = np.empty(len(sources))
         edge_costs_kernel(sources, target, base, limits, toward, self.delta, *self._terms,
-                          *self._arm, *self._failures, out)
+                          *self._arm, *self._table, *self._failures, out)
         return out
 
     def cost(self, start: np.ndarray, end: np.ndarray) -> float:
@@ -129,7 +148,8 @@ class EdgeCoster:
         """
         sources, target, base, _ = _batch(self.arm, sources, target, base, None)
         index, total = cheapest_edge_kernel(sources, target, base, toward, self.delta,
-                                            *self._terms, *self._arm, *self._failures)
+                                            *self._terms, *self._arm, *self._table,
+                                            *self._failures)
         return int(index), float(total)
 
 
@@ -155,6 +175,8 @@ class ReferenceEdgeCoster(EdgeCoster):
                                           self.terms.reach)[0] \
                 if len(self.fmap) and self.terms.cap < np.inf else 0.0
             cost = self.terms.reference_cost(p, step, self.delta, step * len(points), start)
+            if not edge_above_table(self.arm, a, b, self.delta):
+                cost = np.inf
             out[i] = cost if cost < limits[i] else np.inf
         return out + base
 

@@ -38,6 +38,7 @@ from probdis_ros.model.kinematics import (
     axis_chain_pose,
     chain_pose,
     is_identity,
+    lowest_height,
     PLANAR,
 )
 
@@ -52,14 +53,17 @@ CHUNK = 16
 
 @numba.njit(cache=True, nogil=True)
 def _chunk_poses(cs, sn, cd, sd, b, k0, count, n, kind, joint_params, offsets, bases,
-                 tip_offset, tip_rotation, pos, rot):
+                 tip_offset, tip_rotation, shapes, floor, pos, rot):
     """
     Advance the joint cosines/sines count steps; write the poses of points k0+1...
 
     The last point of the edge (k = n) is recomputed from b so that it lands exactly there.
+    Return the lowest height of the arm at these points (:func:`lowest_height`), or inf
+    without a table (floor -inf).
     """
     n_joints = cs.shape[0]
     plain_tip = is_identity(tip_rotation)
+    low = np.inf
     for i in range(count):
         k = k0 + i + 1
         for j in range(n_joints):
@@ -82,11 +86,15 @@ def _chunk_poses(cs, sn, cd, sd, b, k0, count, n, kind, joint_params, offsets, b
             pos[i, 1] = py
             pos[i, 2] = 0.0
             continue
+        if floor > -np.inf:
+            low = min(low, lowest_height(cs, sn, kind, joint_params, offsets, bases,
+                                         tip_offset, shapes))
         if kind == AXIS_CHAIN:
             axis_chain_pose(cs, sn, joint_params, offsets, tip_offset, tip_rotation, pos, rot,
                             i, plain_tip)
             continue
         chain_pose(cs, sn, offsets, bases, tip_offset, tip_rotation, pos, rot, i)
+    return low
 
 
 #: From this many failures on, a chunk skips the failures that cannot raise its maximum.
@@ -364,8 +372,8 @@ def _edge_rotations(a, b, n, kind, cs, sn, cd, sd):
 
 @numba.njit(cache=True, nogil=True)
 def _start_probability(cs, sn, n, kind, joint_params, offsets, bases, tip_offset,
-                       tip_rotation, f_points, f_dirs, f_rots, c_fail, use_orient, prune, pos, rot,
-                       soa, p_buf):
+                       tip_rotation, shapes, f_points, f_dirs, f_rots, c_fail, use_orient, prune,
+                       pos, rot, soa, p_buf):
     """
     Return the failure probability at the start of an edge (its cosines and sines).
 
@@ -377,23 +385,39 @@ def _start_probability(cs, sn, n, kind, joint_params, offsets, bases, tip_offset
     n_joints = cs.shape[0]
     one = np.int64(1)     # not a literal 1: a literal argument would compile a kernel again
     _chunk_poses(cs.copy(), sn.copy(), np.ones(n_joints), np.zeros(n_joints), cs, -one, one, n,
-                 kind, joint_params, offsets, bases, tip_offset, tip_rotation, pos, rot)
+                 kind, joint_params, offsets, bases, tip_offset, tip_rotation, shapes, -np.inf,
+                 pos, rot)
     _chunk_probabilities(pos, rot, one, f_points, f_dirs, f_rots, c_fail, use_orient, prune,
                          soa, p_buf, AT_FAILURE ** 2, 1.0)
     return p_buf[0]
 
 
+@numba.njit(cache=True, inline='always')
+def _ground(cs, sn, kind, joint_params, offsets, bases, tip_offset, shapes, floor):
+    """
+    Return how low an edge starting at (cs, sn) may take the arm: the floor (-inf: no table).
+
+    An edge that starts lower (an arm left near the table) may not go lower than its start:
+    it can leave, upwards, but never sink further.
+    """
+    if floor == -np.inf:
+        return floor
+    return min(floor, lowest_height(cs, sn, kind, joint_params, offsets, bases, tip_offset,
+                                    shapes))
+
+
 @numba.njit(cache=True, nogil=True)
 def edge_cost_kernel(a, b, limit, delta, length_weight, risk_weight, cap, p_max, kind,
-                     joint_params, offsets, bases, tip_offset, tip_rotation,
+                     joint_params, offsets, bases, tip_offset, tip_rotation, shapes, floor,
                      f_points, f_dirs, f_rots, c_fail, use_orient, prune, pos, rot, soa, p_buf):
     """
     Return the cost of edge a -> b, or inf once it reaches limit (it only grows on the way).
 
     ``length_weight L - risk_weight sum (s/delta) log(1 - p)``, inf if a p > cap is not on the
     way out of a region above the cap that the edge started in (:func:`_descend`; the
-    objective's terms, :class:`probdis_ros.model.path_cost.EdgeTerms`).  pos, rot, soa and
-    p_buf are buffers for CHUNK points.
+    objective's terms, :class:`probdis_ros.model.path_cost.EdgeTerms`), and inf if a point
+    takes the arm below the floor (:func:`_ground`).  pos, rot, soa and p_buf are buffers
+    for CHUNK points.
     """
     n_joints = a.shape[0]
     length = 0.0
@@ -406,7 +430,7 @@ def edge_cost_kernel(a, b, limit, delta, length_weight, risk_weight, cap, p_max,
     cost = length_weight * length
     if cost >= limit:
         return np.inf
-    if f_points.shape[1] == 0:
+    if f_points.shape[1] == 0 and floor == -np.inf:
         return cost
     weight = risk_weight * (length / n) / delta
     cs = np.empty(n_joints)
@@ -414,16 +438,18 @@ def edge_cost_kernel(a, b, limit, delta, length_weight, risk_weight, cap, p_max,
     cd = np.empty(n_joints)
     sd = np.empty(n_joints)
     _edge_rotations(a, b, n, kind, cs, sn, cd, sd)
+    ground = _ground(cs, sn, kind, joint_params, offsets, bases, tip_offset, shapes, floor)
     level = cap
     if cap < np.inf:
         level = max(cap, _start_probability(cs, sn, n, kind, joint_params, offsets, bases,
-                                            tip_offset, tip_rotation, f_points, f_dirs,
+                                            tip_offset, tip_rotation, shapes, f_points, f_dirs,
                                             f_rots, c_fail, use_orient, prune, pos, rot, soa,
                                             p_buf))
     for k0 in range(0, n, CHUNK):
         count = min(CHUNK, n - k0)
-        _chunk_poses(cs, sn, cd, sd, b, k0, count, n, kind, joint_params, offsets, bases,
-                     tip_offset, tip_rotation, pos, rot)
+        if _chunk_poses(cs, sn, cd, sd, b, k0, count, n, kind, joint_params, offsets, bases,
+                        tip_offset, tip_rotation, shapes, floor, pos, rot) < ground:
+            return np.inf
         _chunk_probabilities(pos, rot, count, f_points, f_dirs, f_rots, c_fail, use_orient, prune,
                              soa, p_buf, ALONG_NEAR2, ALONG_AT_FAILURE)
         log_survival, highest = _chunk_log_survival(p_buf, count, p_max)
@@ -442,7 +468,8 @@ def edge_cost_kernel(a, b, limit, delta, length_weight, risk_weight, cap, p_max,
 @numba.njit(cache=True, nogil=True)
 def edge_costs_kernel(sources, target, base, limits, toward, delta, length_weight,
                       risk_weight, cap, p_max, kind, joint_params, offsets, bases, tip_offset,
-                      tip_rotation, f_points, f_dirs, f_rots, c_fail, use_orient, prune, out):
+                      tip_rotation, shapes, floor, f_points, f_dirs, f_rots, c_fail, use_orient,
+                      prune, out):
     """
     Write ``base[i] + cost(sources[i] -> target)`` (``target -> sources[i]`` unless toward).
 
@@ -459,7 +486,8 @@ def edge_costs_kernel(sources, target, base, limits, toward, delta, length_weigh
         out[i] = base[i] + edge_cost_kernel(a, b, limits[i], delta, length_weight,
                                             risk_weight, cap, p_max, kind, joint_params,
                                             offsets, bases, tip_offset, tip_rotation,
-                                            f_points, f_dirs, f_rots, c_fail, use_orient,
+                                            shapes, floor, f_points, f_dirs, f_rots, c_fail,
+                                            use_orient,
                                             prune, pos,
                                             rot, soa, p_buf)
 
@@ -467,7 +495,8 @@ def edge_costs_kernel(sources, target, base, limits, toward, delta, length_weigh
 @numba.njit(cache=True, nogil=True)
 def cheapest_edge_kernel(sources, target, base, toward, delta, length_weight, risk_weight,
                          cap, p_max, kind, joint_params, offsets, bases, tip_offset,
-                         tip_rotation, f_points, f_dirs, f_rots, c_fail, use_orient, prune):
+                         tip_rotation, shapes, floor, f_points, f_dirs, f_rots, c_fail,
+                         use_orient, prune):
     """
     Return (i, total) minimising ``base[i] + cost(edge i)``; (-1, inf) if none is finite.
 
@@ -483,6 +512,7 @@ def cheapest_edge_kernel(sources, target, base, toward, delta, length_weight, ri
     m, n_joints = sources.shape
     bound = np.empty(m)           # lower bound of the total (exact when done)
     level = np.full(m, cap)       # highest point probability still allowed (see _descend)
+    ground = np.full(m, floor)    # lowest height still allowed (see _ground)
     done = np.zeros(m, dtype=np.bool_)
     steps = np.zeros(m, dtype=np.int64)
     k_done = np.zeros(m, dtype=np.int64)
@@ -500,7 +530,7 @@ def cheapest_edge_kernel(sources, target, base, toward, delta, length_weight, ri
             length += (b[j] - a[j]) ** 2
         length = np.sqrt(length)
         bound[i] = base[i] + length_weight * length
-        if length == 0.0 or f_points.shape[1] == 0:
+        if length == 0.0 or (f_points.shape[1] == 0 and floor == -np.inf):
             done[i] = True
             continue
         n = max(1, int(np.ceil(length / delta - 1e-12)))
@@ -519,9 +549,8 @@ def cheapest_edge_kernel(sources, target, base, toward, delta, length_weight, ri
             if not done[i]:
                 level[i] = max(cap, _start_probability(
                     cs[i], sn[i], steps[i], kind, joint_params, offsets, bases, tip_offset,
-                    tip_rotation, f_points, f_dirs, f_rots, c_fail, use_orient, prune, pos, rot,
-                    soa,
-                    p_buf))
+                    tip_rotation, shapes, f_points, f_dirs, f_rots, c_fail, use_orient, prune,
+                    pos, rot, soa, p_buf))
     while True:
         pick = -1
         for i in range(m):   # lowest bound first; on equal bounds a finished edge, then index
@@ -536,13 +565,19 @@ def cheapest_edge_kernel(sources, target, base, toward, delta, length_weight, ri
         if done[pick]:
             return pick, bound[pick]
         i = pick
-        if k_done[i] == 0 and cap == np.inf:
-            # an edge's cosines and sines once it is advanced at all (many never are)
-            _edge_rotations(sources[i] if toward else target, ends[i], steps[i], kind, cs[i],
-                            sn[i], cd[i], sd[i])
+        if k_done[i] == 0:
+            if cap == np.inf:
+                # an edge's cosines and sines once it is advanced at all (many never are)
+                _edge_rotations(sources[i] if toward else target, ends[i], steps[i], kind,
+                                cs[i], sn[i], cd[i], sd[i])
+            ground[i] = _ground(cs[i], sn[i], kind, joint_params, offsets, bases, tip_offset,
+                                shapes, floor)
         count = min(CHUNK, steps[i] - k_done[i])
-        _chunk_poses(cs[i], sn[i], cd[i], sd[i], ends[i], k_done[i], count, steps[i], kind,
-                     joint_params, offsets, bases, tip_offset, tip_rotation, pos, rot)
+        if _chunk_poses(cs[i], sn[i], cd[i], sd[i], ends[i], k_done[i], count, steps[i], kind,
+                        joint_params, offsets, bases, tip_offset, tip_rotation, shapes, floor,
+                        pos, rot) < ground[i]:
+            bound[i] = np.inf
+            continue
         _chunk_probabilities(pos, rot, count, f_points, f_dirs, f_rots, c_fail, use_orient, prune,
                              soa, p_buf, ALONG_NEAR2, ALONG_AT_FAILURE)
         k_done[i] += count

@@ -336,3 +336,63 @@ def tip_pose(px, py, pz, r00, r01, r02, r10, r11, r12, r20, r21, r22, tip_offset
         rot[i, 0, c] = r00 * t0 + r01 * t1 + r02 * t2
         rot[i, 1, c] = r10 * t0 + r11 * t1 + r12 * t2
         rot[i, 2, c] = r20 * t0 + r21 * t1 + r22 * t2
+
+
+@numba.njit(cache=True, inline='always')
+def lowest_height(cs, sn, kind, joint_params, offsets, bases, tip_offset, shapes):
+    """
+    Return the lowest z of the arm's collision shapes and of its tip, from joint cos and sin.
+
+    ``shapes`` (S, 9), one row per shape, in chain order: the joint whose frame carries it
+    (1-based), its center (3) and unit axis (3, zeros for a sphere) in that frame, half its
+    length and its radius.  A cylinder's lowest point lies ``h |u_z| + r sqrt(1 - u_z^2)``
+    below its center (u its axis in the world); a sphere's r below.  Only the third row of
+    each joint's rotation is needed for heights, a third of the pose's arithmetic.
+    Chain arms only (CHAIN, AXIS_CHAIN).
+    """
+    pz = 0.0
+    r20, r21, r22 = 0.0, 0.0, 1.0
+    low = np.inf
+    row = 0
+    n_shapes = shapes.shape[0]
+    for j in range(offsets.shape[0]):
+        pz += r20 * offsets[j, 0] + r21 * offsets[j, 1] + r22 * offsets[j, 2]
+        c = cs[j]
+        if kind == AXIS_CHAIN:
+            code = joint_params[j]
+            s = sn[j] if code > 0 else -sn[j]
+            axis = abs(code)
+            if axis == 3.0:
+                r20, r21 = r20 * c + r21 * s, r21 * c - r20 * s
+            elif axis == 2.0:
+                r20, r22 = r20 * c - r22 * s, r22 * c + r20 * s
+            else:
+                r21, r22 = r21 * c + r22 * s, r22 * c - r21 * s
+        else:
+            s = sn[j]
+            t0 = t1 = t2 = 0.0
+            for k in range(3):      # the third row times bases[j, 0] + c bases[j, 1] + s ...
+                w = r20 if k == 0 else (r21 if k == 1 else r22)
+                t0 += w * (bases[j, 0, k, 0] + c * bases[j, 1, k, 0] + s * bases[j, 2, k, 0])
+                t1 += w * (bases[j, 0, k, 1] + c * bases[j, 1, k, 1] + s * bases[j, 2, k, 1])
+                t2 += w * (bases[j, 0, k, 2] + c * bases[j, 1, k, 2] + s * bases[j, 2, k, 2])
+            r20, r21, r22 = t0, t1, t2
+        while row < n_shapes and shapes[row, 0] == j + 1:
+            zc = pz + r20 * shapes[row, 1] + r21 * shapes[row, 2] + r22 * shapes[row, 3]
+            uz = r20 * shapes[row, 4] + r21 * shapes[row, 5] + r22 * shapes[row, 6]
+            low = min(low, zc - shapes[row, 7] * abs(uz)
+                      - shapes[row, 8] * np.sqrt(max(0.0, 1.0 - uz * uz)))
+            row += 1
+    return min(low, pz + r20 * tip_offset[0] + r21 * tip_offset[1] + r22 * tip_offset[2])
+
+
+@numba.njit(cache=True, nogil=True)
+def lowest_heights_kernel(q, kind, joint_params, offsets, bases, tip_offset, shapes, out):
+    """Write :func:`lowest_height` of each configuration of the batch q (N, n_joints)."""
+    cs = np.empty(q.shape[1])
+    sn = np.empty(q.shape[1])
+    for i in range(q.shape[0]):
+        for j in range(q.shape[1]):
+            cs[j] = np.cos(q[i, j])
+            sn[j] = np.sin(q[i, j])
+        out[i] = lowest_height(cs, sn, kind, joint_params, offsets, bases, tip_offset, shapes)

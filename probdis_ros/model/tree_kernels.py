@@ -187,7 +187,8 @@ def grow_kernel(nodes, positions, parent, edge, costs, first_child, next_sibling
                 low, high, clip,
                 rewire_factor, rewire_radius, closest_k, reverse, delta, length_weight,
                 risk_weight, cap, p_max, kind, joint_params, offsets, bases, tip_offset,
-                tip_rotation, f_points, f_dirs, f_rots, c_fail, use_orient, prune):
+                tip_rotation, shapes, floor, f_points, f_dirs, f_rots, c_fail, use_orient,
+                prune):
     """
     Run iterations k_from..k_to-1 of a round of one tree (Algorithm 2), in place.
 
@@ -215,7 +216,8 @@ def grow_kernel(nodes, positions, parent, edge, costs, first_child, next_sibling
         best, _ = cheapest_edge_kernel(
             nodes[candidates], target, np.zeros(len(candidates)), not reverse, delta,
             length_weight, risk_weight, cap, p_max, kind, joint_params, offsets, bases,
-            tip_offset, tip_rotation, f_points, f_dirs, f_rots, c_fail, use_orient, prune)
+            tip_offset, tip_rotation, shapes, floor, f_points, f_dirs, f_rots, c_fail,
+            use_orient, prune)
         if best < 0:
             continue
         closest = candidates[best]
@@ -241,8 +243,8 @@ def grow_kernel(nodes, positions, parent, edge, costs, first_child, next_sibling
         costs_to = costs[near]
         best, total = cheapest_edge_kernel(
             nodes[near], new, costs_to, not reverse, delta, length_weight, risk_weight, cap,
-            p_max, kind, joint_params, offsets, bases, tip_offset, tip_rotation, f_points,
-            f_dirs, f_rots, c_fail, use_orient, prune)
+            p_max, kind, joint_params, offsets, bases, tip_offset, tip_rotation, shapes, floor,
+            f_points, f_dirs, f_rots, c_fail, use_orient, prune)
         if best < 0:
             continue
         chosen = near[best]
@@ -270,8 +272,9 @@ def grow_kernel(nodes, positions, parent, edge, costs, first_child, next_sibling
             b = new if reverse else nodes[node]
             out[i] = 0.0 + edge_cost_kernel(
                 a, b, costs[node] - costs[index], delta, length_weight, risk_weight, cap,
-                p_max, kind, joint_params, offsets, bases, tip_offset, tip_rotation, f_points,
-                f_dirs, f_rots, c_fail, use_orient, prune, buf_pos, buf_rot, soa, p_buf)
+                p_max, kind, joint_params, offsets, bases, tip_offset, tip_rotation, shapes,
+                floor, f_points, f_dirs, f_rots, c_fail, use_orient, prune, buf_pos, buf_rot,
+                soa, p_buf)
         for i in range(len(near)):
             node = near[i]
             if i != best and costs[index] + out[i] < costs[node] and \
@@ -283,8 +286,8 @@ def grow_kernel(nodes, positions, parent, edge, costs, first_child, next_sibling
 @numba.njit(cache=True, nogil=True)
 def connect_kernel(start_nodes, start_costs, goal_nodes, goal_costs, goal_first_child,
                    connect_k, delta, length_weight, risk_weight, cap, p_max, kind,
-                   joint_params, offsets, bases, tip_offset, tip_rotation, f_points, f_dirs,
-                   f_rots, c_fail, use_orient, prune):
+                   joint_params, offsets, bases, tip_offset, tip_rotation, shapes, floor,
+                   f_points, f_dirs, f_rots, c_fail, use_orient, prune):
     """
     Return (start node, goal leaf, total) of Connect (Algorithm 1); (-1, -1, inf) if none.
 
@@ -315,7 +318,8 @@ def connect_kernel(start_nodes, start_costs, goal_nodes, goal_costs, goal_first_
         i, total = cheapest_edge_kernel(
             start_nodes[candidates], goal_nodes[leaf], base,
             toward, delta, length_weight, risk_weight, cap, p_max, kind, joint_params, offsets,
-            bases, tip_offset, tip_rotation, f_points, f_dirs, f_rots, c_fail, use_orient, prune)
+            bases, tip_offset, tip_rotation, shapes, floor, f_points, f_dirs, f_rots, c_fail,
+            use_orient, prune)
         if total < best_total:
             best_total = total
             best_start = candidates[i]

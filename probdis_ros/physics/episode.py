@@ -31,6 +31,7 @@ import time
 
 import numpy as np
 from probdis_ros.model import iiwa_arm
+from probdis_ros.model.table import ROBOT_TABLE, Table
 from probdis_ros.physics.simulated_robot import build_robot, RobotSettings
 from probdis_ros.planning import Disentangler, Method, RRTSettings, State
 from probdis_ros.planning.disentangle import DEFAULT_MIN_RETREAT
@@ -80,8 +81,13 @@ def run_physics_episode(scene: str, method: str | Method = 'probabilistic', seed
                         run_settings: RunSettings | None = None,
                         robot_settings: RobotSettings | None = None,
                         time_limit: float = 600.0, goal_tolerance: float = 0.04,
-                        min_retreat: float = DEFAULT_MIN_RETREAT) -> PhysicsEpisode:
-    """Disentangle a physics scene from its start to its goal; reproducible from seed."""
+                        min_retreat: float = DEFAULT_MIN_RETREAT,
+                        table: Table | None = ROBOT_TABLE) -> PhysicsEpisode:
+    """
+    Disentangle a physics scene from its start to its goal; reproducible from seed.
+
+    The planner keeps the arm above ``table`` as the planner node does by default.
+    """
     wall = time.perf_counter()
     method = Method.resolve(method) if isinstance(method, str) else method
     if robot_settings is None and run_settings is not None:
@@ -89,7 +95,7 @@ def run_physics_episode(scene: str, method: str | Method = 'probabilistic', seed
         robot_settings = RobotSettings(jtc_start=run_settings.jtc_start)
     robot, _ = build_robot('physics', scene, robot_settings)
     scene_doc = robot.engine.scene
-    arm = iiwa_arm()
+    arm = iiwa_arm().on_table(table)
     fmap = method.failure_map(arm.task_space)
     # the planner node's default margin, so that offline runs plan as the node does
     rrt = rrt or RRTSettings(joint_margin=ROBOT_JOINT_MARGIN)

@@ -17,7 +17,9 @@ The Epsilon baseline (epsilon-greedy): no map, no search.
 
 With probability epsilon the path is the straight joint-space move to the goal; otherwise it
 is a move of length ``step`` in a uniformly random joint-space direction, cut at the joint
-limits.  The failure map is ignored.
+limits.  The failure map is ignored.  An arm on a table (:mod:`probdis_ros.model.table`)
+never moves through it: a move that would is drawn again (a goal move replaced by a random
+one), up to ``TABLE_TRIES`` times, else the arm stays.
 """
 
 from __future__ import annotations
@@ -26,11 +28,14 @@ import time
 
 import numpy as np
 from probdis_ros.model.arms import Arm
+from probdis_ros.model.edge_costs import edge_above_table
 from probdis_ros.model.failure_map import FailureMap
 from probdis_ros.planning.prob_rrt import Plan
 
 #: X of the Epsilon baseline when none is given (the paper's Epsilon 0.2).
 DEFAULT_EPSILON = 0.2
+#: random moves drawn for a move the table allows before the arm stays where it is
+TABLE_TRIES = 100
 
 
 class EpsilonPlanner:
@@ -56,11 +61,18 @@ class EpsilonPlanner:
         """Return a one-edge path (the map is not used)."""
         t0 = time.perf_counter()
         start = np.asarray(start, dtype=float)
-        if rng.random() < self.epsilon:
-            end = np.asarray(goal, dtype=float)
+        end = np.asarray(goal, dtype=float) if rng.random() < self.epsilon else self._random(
+            start, rng)
+        for _ in range(TABLE_TRIES):
+            if edge_above_table(self.arm, start, end):
+                break
+            end = self._random(start, rng)
         else:
-            direction = rng.normal(size=len(start))
-            end = start + self.step * direction / np.linalg.norm(direction)
-            end = np.clip(end, self.low, self.high)
+            end = start
         path = np.array([start, end])
         return Plan(path, float(np.linalg.norm(end - start)), time.perf_counter() - t0)
+
+    def _random(self, start: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        direction = rng.normal(size=len(start))
+        end = start + self.step * direction / np.linalg.norm(direction)
+        return np.clip(end, self.low, self.high)

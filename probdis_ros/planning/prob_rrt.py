@@ -199,7 +199,12 @@ class ProbRRT:
         """Return the least-cost path from start to goal found, or None if none is feasible."""
         t0 = time.perf_counter()
         here = self._checked(start, 'start')
-        if np.array_equal(here, self._checked(goal, 'goal')):
+        there = self._checked(goal, 'goal')
+        if not self.arm.above_table(there)[0]:
+            raise ValueError(f'goal configuration takes the arm below the table '
+                             f'(lowest point {self.arm.lowest_heights(there)[0]:.3f} m, floor '
+                             f'{self.arm.table.floor:.3f} m): {there}')
+        if np.array_equal(here, there):
             return Plan(here[None], 0.0)        # there already: no detour
         coster = self.objective.coster(self.arm, fmap, self.settings.delta, self.coster_type)
         trees = self.grow(start, goal, coster, rng, t0)

@@ -55,6 +55,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 import numpy as np
 from probdis_ros.model import FailureMap, FailureMapError, iiwa_arm
 from probdis_ros.model.failure_map import set_aside, write_document
+from probdis_ros.model.table import ROBOT_TABLE, Table
 from probdis_ros.motion.detector import DetectorSettings, MotionWatch
 from probdis_ros.motion.state_check import BadJointStateError, StateCheck, values_by_name
 from probdis_ros.planning import Disentangler, Method, RRTSettings, State
@@ -231,6 +232,15 @@ PARAMETERS = {
                     'checks; empty: not checked')),
     'orientation': (True, ParameterDescriptor(
         description='model the flange orientation in the failure map (3-D with orientation)')),
+    'table': (True, ParameterDescriptor(
+        description='the arm stands on a table: no plan takes any part of it (its URDF '
+                    'collision shapes) or its tip below table_height + table_clearance; '
+                    'false: no table is known (an arm on a wall or a ceiling)')),
+    'table_height': (ROBOT_TABLE.height, _float(
+        'height [m] of the table top in the base frame (lbr_link_0 stands on it at 0)',
+        -5.0, 5.0)),
+    'table_clearance': (ROBOT_TABLE.clearance, _float(
+        'distance [m] every part of the arm keeps from the table top', 0.0, 1.0)),
 }
 
 
@@ -247,6 +257,9 @@ class PlannerNode(Node):
         self._run_settings()      # start-up values that do not go together: exit 2, named
         self.use_sim_time = bool(self.get_parameter('use_sim_time').value)
         self.arm = iiwa_arm(with_orientation=bool(self.get_parameter('orientation').value))
+        if self.get_parameter('table').value:
+            self.arm = self.arm.on_table(Table(self.get_parameter('table_height').value,
+                                               self.get_parameter('table_clearance').value))
         self.joint_names = list(self.get_parameter('joint_names').value)
         problem = self._goal_problem(self.get_parameter('goal').value)
         if len(self.joint_names) != 7:
@@ -403,6 +416,10 @@ class PlannerNode(Node):
             return f'needs 7 values, has {goal.size}'
         if not np.all(np.isfinite(goal)) or not self.arm.within_limits(goal)[0]:
             return 'outside the joint limits'
+        if not self.arm.above_table(goal)[0]:
+            return (f'takes the arm below the table (lowest point '
+                    f'{self.arm.lowest_heights(goal)[0]:.3f} m, floor '
+                    f'{self.arm.table.floor:.3f} m)')
         return ''
 
     def _run_settings(self, changes: dict | None = None) -> RunSettings:
@@ -437,7 +454,8 @@ class PlannerNode(Node):
                 except ValueError as err:
                     return SetParametersResult(successful=False, reason=f'method: {err}')
             if param.name in ('joint_names', 'joint_states_topic', 'trajectory_topic',
-                              'orientation') and hasattr(self, 'arm'):
+                              'orientation', 'table', 'table_height',
+                              'table_clearance') and hasattr(self, 'arm'):
                 return SetParametersResult(successful=False,
                                            reason=f'{param.name} is fixed at start-up')
         return SetParametersResult(successful=True)

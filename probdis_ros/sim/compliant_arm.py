@@ -19,7 +19,9 @@ Each edge of the path is cut into joint-space steps of at most ``check_step``; t
 end-effector polyline through them is tested against the hidden obstacles piece by piece
 (:func:`probdis_ros.sim.obstacles.first_contact`).  On contact the arm stops just before the
 contact point, on the straight joint-space segment it was following, and stays there: that is
-what a joint-impedance-controlled arm does when a grasped object catches.
+what a joint-impedance-controlled arm does when a grasped object catches.  An arm on a table
+(:mod:`probdis_ros.model.table`) is stopped the same way where a part of it would go below
+the table top (never lower than where the path began: an arm started there may rise).
 """
 
 from __future__ import annotations
@@ -69,9 +71,11 @@ class CompliantArm:
         self.check_step = check_step
 
     def collides(self, config: np.ndarray) -> bool:
-        """Tell whether the end-effector at config is inside an obstacle."""
+        """Tell whether the end-effector at config is in an obstacle, or the arm in its table."""
         x = self.arm.fk(config).positions
-        return any(bool(o.contains(x)[0]) for o in self.obstacles)
+        table = self.arm.table
+        return any(bool(o.contains(x)[0]) for o in self.obstacles) or (
+            table is not None and self.arm.lowest_heights(config)[0] < table.height)
 
     def execute(self, path: np.ndarray) -> Execution:
         """Follow path (via points ``(M, n)``, starting where the arm is) until contact."""
@@ -80,11 +84,26 @@ class CompliantArm:
         pose = self.arm.fk(dense)
         hit = first_contact(self.obstacles, pose.positions, pose.orientations,
                             self.orientation_tolerance)
+        table = self._table_contact(dense)
+        if table is not None and (hit is None or table < hit):
+            hit = table
         if hit is None:
             return Execution(path[-1].copy(), False, -1, dense)
         seg, frac = hit
         stop = dense[seg] + max(0.0, frac - BACK_OFF) * (dense[seg + 1] - dense[seg])
         return Execution(stop, True, int(edges[seg]), np.vstack([dense[:seg + 1], stop]))
+
+    def _table_contact(self, dense: np.ndarray) -> tuple[int, float] | None:
+        """Return (step, fraction) where the arm first meets its table on dense, or None."""
+        if self.arm.table is None or len(dense) < 2:
+            return None
+        heights = self.arm.lowest_heights(dense)
+        floor = min(self.arm.table.height, heights[0])
+        below = np.flatnonzero(heights[1:] < floor)
+        if not len(below):
+            return None
+        i = int(below[0])            # between dense[i] (above) and dense[i + 1] (below)
+        return i, float((heights[i] - floor) / (heights[i] - heights[i + 1]))
 
     def path_is_free(self, path: np.ndarray) -> bool:
         """Tell whether the whole path can be executed without contact."""

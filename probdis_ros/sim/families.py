@@ -70,6 +70,7 @@ import math
 import numpy as np
 from probdis_ros.model import arm_for_setting
 from probdis_ros.model.arms import Arm, quaternion_to_rotation
+from probdis_ros.model.table import ROBOT_TABLE
 from probdis_ros.planning.seeds import stream, WORLD
 from probdis_ros.sim.compliant_arm import densify
 from probdis_ros.sim.obstacles import Obstacle
@@ -404,7 +405,7 @@ def random_family_world(family: str, seed: int, max_draws: int = 100,
     """
     if family not in BUILDERS:
         raise ValueError(f'unknown family {family!r}; choose from {", ".join(FAMILIES)}')
-    arm = arm_for_setting(SETTING)
+    arm = arm_for_setting(SETTING).on_table(ROBOT_TABLE)
     rng = stream(seed, WORLD)
     for draw in range(max_draws):
         start = _draw_configuration(arm, rng, in_workspace)
@@ -420,8 +421,11 @@ def random_family_world(family: str, seed: int, max_draws: int = 100,
         goal = _draw_configuration(arm, rng, beyond)
         if family == 'clutter':
             trap.obstacles = _clutter_items(rng, arm, trap, start, goal, q_start)
+        if not arm.above_table(np.array([start, goal])).all():
+            continue        # an arm that would start or end in its table
         world = FamilyWorld(SETTING, start, goal, trap.obstacles, trap.tolerance,
-                            name=f'{family}-seed{seed}', rejected_draws=draw, family=family,
+                            name=f'{family}-seed{seed}', rejected_draws=draw, table=ROBOT_TABLE,
+                            family=family,
                             params={**trap.params, 'obstacles': len(trap.obstacles)},
                             way_out=trap.way_out)
         sim = world.compliant_arm()

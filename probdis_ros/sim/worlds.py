@@ -27,6 +27,7 @@ Scenario files (YAML; README "Scenario files")::
     start: [q1, ..., q7]             # rad
     goal: [q1, ..., q7]
     orientation_tolerance: 0.5       # 3d-orient: D_ORIENT below which an obstacle blocks
+    table: {height: 0.0, clearance: 0.05}   # 3d, 3d-orient, optional: the arm stands on it
     obstacles:
       - {type: disc, center: [x, y], radius: r}                          # 2d
       - {type: ball, center: [x, y, z], radius: r}                       # 3d
@@ -42,6 +43,7 @@ from pathlib import Path
 import numpy as np
 from probdis_ros.model import arm_for_setting, SETTINGS
 from probdis_ros.model.arms import Arm
+from probdis_ros.model.table import Table
 from probdis_ros.planning.seeds import stream, WORLD
 from probdis_ros.sim.compliant_arm import CompliantArm, densify
 from probdis_ros.sim.obstacles import Obstacle
@@ -64,6 +66,8 @@ class World:
     orientation_tolerance: float = 0.5
     name: str = ''
     rejected_draws: int = 0
+    #: the table the arm stands on (the planner keeps the arm above it); None: none
+    table: Table | None = None
     arm: Arm = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -72,6 +76,10 @@ class World:
             raise ScenarioError(f'setting must be one of {", ".join(SETTINGS)}, '
                                 f'got {self.setting!r}')
         self.arm = arm_for_setting(self.setting)
+        if self.table is not None:
+            if self.setting == '2d':
+                raise ScenarioError('a table needs the iiwa (3d, 3d-orient), not the 2d arm')
+            self.arm = self.arm.on_table(self.table)
         for name in ('start', 'goal'):
             value = np.asarray(getattr(self, name), dtype=float).reshape(-1)
             if value.shape != (self.arm.n_joints,) or not np.all(np.isfinite(value)):
@@ -79,6 +87,10 @@ class World:
             if not self.arm.within_limits(value)[0]:
                 raise ScenarioError(f'{name} is outside the joint limits of the '
                                     f'{self.arm.name} arm')
+            if not self.arm.above_table(value)[0]:
+                raise ScenarioError(f'{name} takes the arm below the table (lowest point '
+                                    f'{self.arm.lowest_heights(value)[0]:.3f} m, floor '
+                                    f'{self.table.floor:.3f} m)')
             setattr(self, name, value)
         dim = self.arm.task_space.dim
         for i, obstacle in enumerate(self.obstacles):
@@ -95,6 +107,8 @@ class World:
         doc = {'setting': self.setting, 'start': self.start.tolist(),
                'goal': self.goal.tolist(), 'orientation_tolerance': self.orientation_tolerance,
                'obstacles': [o.to_dict() for o in self.obstacles]}
+        if self.table is not None:
+            doc['table'] = {'height': self.table.height, 'clearance': self.table.clearance}
         if self.name:
             doc = {'name': self.name, **doc}
         return doc
@@ -142,8 +156,14 @@ def world_from_dict(doc: object) -> World:
         except (TypeError, ValueError) as err:
             raise ScenarioError(f'obstacle {i}: {err}') from None
     try:
+        table = doc.get('table')
+        if table is not None:
+            if not isinstance(table, dict) or set(table) - {'height', 'clearance'}:
+                raise ScenarioError('table must be a mapping of height and clearance [m]')
+            table = Table(**{k: float(v) for k, v in table.items()})
         return World(str(doc['setting']), doc['start'], doc['goal'], obstacles,
-                     float(doc.get('orientation_tolerance', 0.5)), str(doc.get('name', '')))
+                     float(doc.get('orientation_tolerance', 0.5)), str(doc.get('name', '')),
+                     table=table)
     except (TypeError, ValueError) as err:
         raise ScenarioError(str(err)) from None
 
