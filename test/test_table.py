@@ -174,3 +174,13 @@ def test_the_robots_methods_plan_above_the_table():
     goal = np.array([1.2, 1.0, 0.0, -0.6, 0.0, 1.2, 0.0])
     plan = planner.plan(start, goal, FailureMap(ARM.task_space), np.random.default_rng(0))
     assert ARM.lowest_heights(dense(plan.path)).min() >= ROBOT_TABLE.height
+
+
+def test_a_grasped_objects_ball_about_the_tip_is_kept_above_the_table_too():
+    held = FREE.on_table(ROBOT_TABLE, object_radius=0.3)
+    tips = FREE.tip_frames(RNG_CONFIGS)[0][:, 2]
+    assert np.allclose(held.lowest_heights(RNG_CONFIGS),
+                       np.minimum(FREE.lowest_heights(RNG_CONFIGS), tips - 0.3))
+    assert len(FREE.shapes) == len(ARM.shapes) == len(held.shapes) - 1      # FREE unchanged
+    with pytest.raises(ValueError, match='object_radius'):
+        FREE.on_table(ROBOT_TABLE, object_radius=-1.0)

@@ -33,6 +33,7 @@ from abc import ABC, abstractmethod
 import copy
 from dataclasses import dataclass
 from enum import Enum
+import math
 from pathlib import Path
 
 import numpy as np
@@ -296,12 +297,22 @@ class SerialChainArm(Arm):
                    np.array(model.velocityLimit), with_orientation,
                    collision_shapes(model, str(urdf)))
 
-    def on_table(self, table: Table | None) -> SerialChainArm:
-        """Return this arm standing on table (None: on none known), sharing the rest."""
+    def on_table(self, table: Table | None, object_radius: float = 0.0) -> SerialChainArm:
+        """
+        Return this arm standing on table (None: on none known), sharing the rest.
+
+        ``object_radius`` [m]: the grasped object lies within a ball of this radius about
+        the tip, which the table check then keeps above the floor too (a shape of its own).
+        """
         if table is not None and self.shapes is None:
             raise ValueError(f'{self.name}: no collision shapes known, so no table check')
+        if not (math.isfinite(object_radius) and object_radius >= 0):
+            raise ValueError(f'object_radius must be >= 0, got {object_radius}')
         arm = copy.copy(self)
         arm.table = table
+        if object_radius > 0:
+            ball = [self.n_joints, *self._tip_offset, 0.0, 0.0, 0.0, 0.0, object_radius]
+            arm.shapes = np.ascontiguousarray(np.vstack([self.shapes, ball]))
         return arm
 
     def table_params(self) -> tuple[np.ndarray, float]:

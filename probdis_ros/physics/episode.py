@@ -86,7 +86,8 @@ def run_physics_episode(scene: str, method: str | Method = 'probabilistic', seed
     """
     Disentangle a physics scene from its start to its goal; reproducible from seed.
 
-    The planner keeps the arm above ``table`` as the planner node does by default.
+    The planner keeps the arm and the grasped object (a ball about the flange point that
+    holds it) above ``table``, as the planner node does with its parameters.
     """
     wall = time.perf_counter()
     method = Method.resolve(method) if isinstance(method, str) else method
@@ -95,7 +96,8 @@ def run_physics_episode(scene: str, method: str | Method = 'probabilistic', seed
         robot_settings = RobotSettings(jtc_start=run_settings.jtc_start)
     robot, _ = build_robot('physics', scene, robot_settings)
     scene_doc = robot.engine.scene
-    arm = iiwa_arm().on_table(table)
+    held = scene_doc.grasped.reach if scene_doc.grasped is not None and table else 0.0
+    arm = iiwa_arm().on_table(table, held)
     fmap = method.failure_map(arm.task_space)
     # the planner node's default margin, so that offline runs plan as the node does
     rrt = rrt or RRTSettings(joint_margin=ROBOT_JOINT_MARGIN)

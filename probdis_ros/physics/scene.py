@@ -111,6 +111,18 @@ class Primitive:
     name: str = ''
 
     @property
+    def extent(self) -> float:
+        """Return the radius [m] of a ball about the shape's center that holds it."""
+        if self.kind == 'box':
+            return float(np.linalg.norm(self.size)) / 2
+        if self.kind == 'sphere':
+            return self.size[0]
+        radius, length = self.size
+        if self.kind == 'capsule':
+            return length / 2 + radius
+        return float(np.hypot(length / 2, radius))
+
+    @property
     def volume(self) -> float:
         """Return the shape's volume in m^3 (spreads an object's mass over its shapes)."""
         if self.kind == 'box':
@@ -161,6 +173,12 @@ class GraspedObject:
 
     shapes: tuple[Primitive, ...]
     mass: float
+
+    @property
+    def reach(self) -> float:
+        """Return the radius [m] of a ball about the flange point that holds every shape."""
+        return max((float(np.linalg.norm(s.position)) + s.extent for s in self.shapes),
+                   default=0.0)
 
 
 @dataclass(frozen=True)

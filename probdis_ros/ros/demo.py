@@ -141,14 +141,19 @@ def start_disentangling(client, planner: subprocess.Popen, mock: subprocess.Pope
         time.sleep(0.2)
 
 
-def world_of(world: str, engine: str) -> tuple[Path, str, np.ndarray]:
-    """Return a world's file, name and goal: a physics scene, or a kinematic scenario."""
+def world_of(world: str, engine: str) -> tuple[Path, str, np.ndarray, float]:
+    """
+    Return a world's file, name, goal and the reach of its grasped object about the flange.
+
+    A physics scene, or a kinematic scenario (whose object is the flange point: reach 0).
+    """
     if engine == 'physics':
         scene = load_scene(world)
-        return Path(scene.source or world), scene.name, scene.goal
+        reach = scene.grasped.reach if scene.grasped is not None else 0.0
+        return Path(scene.source or world), scene.name, scene.goal, reach
     path = scenario_path(world)
     scenario = load_world(path)
-    return path, scenario.name or str(path), scenario.goal
+    return path, scenario.name or str(path), scenario.goal, 0.0
 
 
 def run_demo(world: str = DEFAULT_SCENE, timeout: float = 300.0, quiet: bool = False,
@@ -167,7 +172,7 @@ def run_demo(world: str = DEFAULT_SCENE, timeout: float = 300.0, quiet: bool = F
     """
     from probdis_ros.ros.client import PlannerClient
 
-    path, name, goal_config = world_of(world, engine)
+    path, name, goal_config, object_radius = world_of(world, engine)
     env = ros_environment()
     os.environ.update({k: env[k] for k in ('ROS_AUTOMATIC_DISCOVERY_RANGE', 'ROS_DOMAIN_ID')})
     say = (lambda *a: None) if quiet else (lambda *a: print(*a, file=sys.stderr, flush=True))
@@ -184,7 +189,7 @@ def run_demo(world: str = DEFAULT_SCENE, timeout: float = 300.0, quiet: bool = F
         planner = subprocess.Popen(node_command(
             'probdis_ros.ros.planner_node', '--params-file', params, '-p', f'goal:={goal}',
             '-p', f'map_file:={Path(tmp) / "map.json"}', *desired,
-            '-p', f'controller_node:=/{MOCK_NODE}',
+            '-p', f'controller_node:=/{MOCK_NODE}', '-p', f'object_radius:={object_radius}',
             *(('-p', 'use_sim_time:=true') if sim_time else ()), *extra_planner_args), env=env)
         status: dict = {}
         try:

@@ -241,6 +241,10 @@ PARAMETERS = {
         -5.0, 5.0)),
     'table_clearance': (ROBOT_TABLE.clearance, _float(
         'distance [m] every part of the arm keeps from the table top', 0.0, 1.0)),
+    'object_radius': (0.0, _float(
+        'radius [m] of a ball about the flange point (the tip) that holds the grasped '
+        'object: the table check keeps it above the table too; 0: the point alone',
+        0.0, 2.0)),
 }
 
 
@@ -259,7 +263,8 @@ class PlannerNode(Node):
         self.arm = iiwa_arm(with_orientation=bool(self.get_parameter('orientation').value))
         if self.get_parameter('table').value:
             self.arm = self.arm.on_table(Table(self.get_parameter('table_height').value,
-                                               self.get_parameter('table_clearance').value))
+                                               self.get_parameter('table_clearance').value),
+                                         self.get_parameter('object_radius').value)
         self.joint_names = list(self.get_parameter('joint_names').value)
         problem = self._goal_problem(self.get_parameter('goal').value)
         if len(self.joint_names) != 7:
@@ -454,8 +459,8 @@ class PlannerNode(Node):
                 except ValueError as err:
                     return SetParametersResult(successful=False, reason=f'method: {err}')
             if param.name in ('joint_names', 'joint_states_topic', 'trajectory_topic',
-                              'orientation', 'table', 'table_height',
-                              'table_clearance') and hasattr(self, 'arm'):
+                              'orientation', 'table', 'table_height', 'table_clearance',
+                              'object_radius') and hasattr(self, 'arm'):
                 return SetParametersResult(successful=False,
                                            reason=f'{param.name} is fixed at start-up')
         return SetParametersResult(successful=True)
