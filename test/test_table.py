@@ -184,3 +184,27 @@ def test_a_grasped_objects_ball_about_the_tip_is_kept_above_the_table_too():
     assert len(FREE.shapes) == len(ARM.shapes) == len(held.shapes) - 1      # FREE unchanged
     with pytest.raises(ValueError, match='object_radius'):
         FREE.on_table(ROBOT_TABLE, object_radius=-1.0)
+
+
+def test_the_physics_mock_has_the_table_top_the_arm_stands_on():
+    import mujoco
+    from probdis_ros.physics import load_scene
+    from probdis_ros.physics.model import build_mjcf, TABLE
+    from probdis_ros.physics.settings import PhysicsSettings
+
+    scene = load_scene('demo_hook')
+    low = RNG_CONFIGS[np.argmin(ARM.lowest_heights(RNG_CONFIGS))]
+
+    def table_contacts(q, settings=PhysicsSettings()):
+        model = mujoco.MjModel.from_xml_string(build_mjcf(scene, settings))
+        data = mujoco.MjData(model)
+        data.qpos[:7] = q
+        mujoco.mj_forward(model, data)
+        if settings.table_height is None:
+            return None
+        table = model.geom(TABLE).id
+        return sum(table in (c.geom1, c.geom2) for c in data.contact[:data.ncon])
+
+    assert table_contacts(scene.start) == 0      # the base stands on it without a contact
+    assert table_contacts(low) > 0
+    assert table_contacts(low, PhysicsSettings(table_height=None)) is None

@@ -51,6 +51,7 @@ FLANGE = 'lbr_link_ee'
 OBJECT_BODY = 'grasped_object'
 ROBOT_CONTYPE, SCENE_CONAFFINITY = 1, 1
 OBJECT_CONTYPE = 2     # the grasped object's own bit, for scenes whose obstacles touch it alone
+TABLE = 'table'        # the table top's geom (PhysicsSettings.table_height)
 
 
 @dataclass(frozen=True)
@@ -271,6 +272,16 @@ def _scene_bodies(scene: Scene, settings: PhysicsSettings) -> list[str]:
     return lines
 
 
+def _table(scene: Scene | None, settings: PhysicsSettings) -> list[str]:
+    """Return the table top under the base, touched by the links and the object (in a scene)."""
+    if scene is None or settings.table_height is None:
+        return []
+    return [f'<geom name="{TABLE}" type="plane" size="0 0 1" '
+            f'pos="0 0 {_f(settings.table_height)}" contype="0" '
+            f'conaffinity="{SCENE_CONAFFINITY | OBJECT_CONTYPE}" '
+            f'friction="{_f(settings.friction)} 0.005 0.0001" rgba="0.8 0.75 0.65 1"/>']
+
+
 def object_gravcomp(scene: Scene | None, settings: PhysicsSettings) -> float:
     """Return the share of the object's weight the controller compensates (assumed / real)."""
     if scene is None or scene.grasped is None:
@@ -337,7 +348,7 @@ def build_mjcf(scene: Scene | None = None, settings: PhysicsSettings | None = No
   </default>
   <worldbody>
     {indent.join(body_lines)}
-    {indent.join(scene_lines)}
+    {indent.join(scene_lines + _table(scene, settings))}
   </worldbody>
   <actuator>
     {indent.join(actuators)}

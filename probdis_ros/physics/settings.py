@@ -52,6 +52,10 @@ class PhysicsSettings:
     contact_timeconst: float = 0.005
     #: How often [s] the configuration-dependent damping D(q) is recomputed within advance().
     damping_update: float = 0.01
+    #: Height [m] of the table top the base stands on, a plane the arm and the object touch
+    #: like any obstacle (the planner's own table check keeps them 5 cm above it); None:
+    #: no table in a scene.
+    table_height: float | None = 0.0
 
     def __post_init__(self) -> None:
         """Refuse values the simulation cannot run with."""
