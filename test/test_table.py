@@ -195,7 +195,8 @@ def test_the_physics_mock_has_the_table_top_the_arm_stands_on():
     scene = load_scene('demo_hook')
     low = RNG_CONFIGS[np.argmin(ARM.lowest_heights(RNG_CONFIGS))]
 
-    def table_contacts(q, settings=PhysicsSettings()):
+    def table_contacts(q, settings=None):
+        settings = settings or PhysicsSettings()
         model = mujoco.MjModel.from_xml_string(build_mjcf(scene, settings))
         data = mujoco.MjData(model)
         data.qpos[:7] = q
