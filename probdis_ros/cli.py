@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 from collections.abc import Callable
+from dataclasses import replace
 import json
 import math
 import os
@@ -391,6 +392,8 @@ def cmd_sim(args: argparse.Namespace) -> int:
         world = random_world(args.setting or '2d', args.obstacles, args.seed or 0)
     if args.plot and world.setting != '2d':
         raise UsageError('--plot draws 2-D episodes; use --setting 2d')
+    if args.no_table:
+        world = replace(world, table=None)
     seed = args.seed or 0
     result = run_episode(world, method, seed=seed, max_paths=args.max_paths,
                          c_fail=method.map_c_fail(args.c_fail))
@@ -441,9 +444,9 @@ def _sim_physics(args: argparse.Namespace) -> int:
     from probdis_ros.physics.picture import plot_scene_run
     from probdis_ros.planning import Method
 
-    if args.scenario or args.setting:
+    if args.scenario or args.setting or args.no_table:
         raise UsageError('--engine physics runs a --scene or a --family, not a --scenario '
-                         'or --setting')
+                         'or --setting, on its table')
     _check_sim_args(args)
     scene = args.scene or 'demo_hook'
     if args.family:
@@ -873,6 +876,9 @@ def build_parser() -> argparse.ArgumentParser:
     _jtc_start_argument(sim, ' (with --engine physics)')
     sim.add_argument('--scene', help='with --engine physics: a scene file, or the name of one '
                      'in config/scenes/ (default demo_hook)')
+    sim.add_argument('--no-table', action='store_true', help='kinematic: no table under the '
+                     "arm (the family worlds and the robot scenarios have one; the JSON's "
+                     'lowest_m shows how low the arm went)')
     sim.set_defaults(handler=cmd_sim)
 
     for name, text in (('planner', 'run the planner node (ROS arguments pass through)'),

@@ -209,3 +209,18 @@ def test_the_physics_mock_has_the_table_top_the_arm_stands_on():
     assert table_contacts(scene.start) == 0      # the base stands on it without a contact
     assert table_contacts(low) > 0
     assert table_contacts(low, PhysicsSettings(table_height=None)) is None
+
+
+def test_probdis_sim_reports_how_low_the_arm_went_with_and_without_the_table(capsys):
+    import json
+
+    from probdis_ros import cli
+
+    # a training world whose way out went below the base's plane before the table
+    lowest = {}
+    for flag in ((), ('--no-table',)):
+        assert cli.main(['sim', '--family', 'open_box', '--seed', '1005', '--json',
+                         '--method', 'probabilistic', *flag]) == 0
+        lowest[flag] = json.loads(capsys.readouterr().out)['lowest_m']
+    assert lowest[()] >= ROBOT_TABLE.floor > ROBOT_TABLE.height > lowest[('--no-table',)]
+    assert cli.main(['sim', '--engine', 'physics', '--no-table']) == 2

@@ -39,9 +39,19 @@ class EpisodeResult:
     empty_plans: int = 0
 
     def summary(self) -> dict:
-        """Return the JSON summary printed by ``probdis sim --json``."""
-        return {'success': self.success, 'paths': self.paths, 'failures': self.failures,
-                'empty_plans': self.empty_plans, 'plan_times_s': self.plan_times_s}
+        """
+        Return the JSON summary printed by ``probdis sim --json``.
+
+        With an arm of known shape (the iiwa), ``lowest_m``: the lowest height [m] any part
+        of it reached along the executed paths (their ways back retrace them), against
+        the base's plane, whether or not the world has a table.
+        """
+        out = {'success': self.success, 'paths': self.paths, 'failures': self.failures,
+               'empty_plans': self.empty_plans, 'plan_times_s': self.plan_times_s}
+        if getattr(self.world.arm, 'shapes', None) is not None and self.traces:
+            out['lowest_m'] = round(float(min(self.world.arm.lowest_heights(t).min()
+                                              for t in self.traces)), 4)
+        return out
 
 
 def drive(loop: Disentangler, sim: CompliantArm, current: np.ndarray,
