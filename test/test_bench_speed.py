@@ -196,3 +196,11 @@ def test_bench_plan_times_local_failures_and_refuses_a_reach_that_is_not_positiv
     with pytest.raises(ValueError, match='--reach'):
         args = parser.parse_args(['plan', '--reach', '0'])
         args.handler(args)
+
+
+def test_bench_plan_times_the_arm_on_its_table(capsys):
+    parser = argparse.ArgumentParser()
+    add_plan_command(parser.add_subparsers())
+    args = parser.parse_args(['plan', '--seeds', '1', '--large', '0', '--table'])
+    assert args.handler(args) == 0
+    assert 'iiwa with orientation, on its table' in capsys.readouterr().out
