@@ -436,8 +436,9 @@ def test_informed_beats_probabilistic_on_a_few_family_worlds():
 
 # evaluation episodes whose records RESULTS.md's tables are made of: the paper's settings
 # (sweep seed 0) and the families (seeds 0-99 of each), of episodes that end within seconds
-RECORDS = {'probabilistic': 'results/families/episodes.jsonl',
-           'informed:adfhij': 'results/families/informed_adfhij_eval/episodes.jsonl',
+# (the families since the robot's table: results/families_table/)
+RECORDS = {'probabilistic': 'results/families_table/episodes.jsonl',
+           'informed:adfhij': 'results/families_table/informed_eval/episodes.jsonl',
            'settings': 'results/sweep/episodes.jsonl'}
 
 
