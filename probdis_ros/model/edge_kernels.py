@@ -27,7 +27,9 @@ Arm parameters as in :mod:`probdis_ros.model.kinematics`.  Failure parameters, o
 coordinate (so that a map of any size has one numba type, C-contiguous, and a loop over the
 failures reads each coordinate contiguously): points (3, F), unit directions (3, F) (z = 0
 in 2-D), rotations (3, 3, F) of the failure orientations, c_fail as the pair (C_FAIL,
-1 / reach^2) (0: no reach, the paper's kernel), and use_orient.
+1 / reach^2) (0: no reach, the paper's kernel), and use_orient.  The arm's table
+(:mod:`probdis_ros.model.table`): its collision shapes (S, 9) and the floor no point may go
+below (-inf: no table, and nothing is checked).
 """
 
 import numba
