@@ -224,3 +224,15 @@ def test_probdis_sim_reports_how_low_the_arm_went_with_and_without_the_table(cap
         lowest[flag] = json.loads(capsys.readouterr().out)['lowest_m']
     assert lowest[()] >= ROBOT_TABLE.floor > ROBOT_TABLE.height > lowest[('--no-table',)]
     assert cli.main(['sim', '--engine', 'physics', '--no-table']) == 2
+
+
+def test_rviz_shows_the_table_top_and_the_floor_above_it():
+    from probdis_ros.ros.markers import markers_msg
+    from rclpy.clock import Clock
+
+    def plates(arm):
+        msg = markers_msg(arm, FailureMap(arm.task_space), None, Clock())
+        return [m.pose.position.z for m in msg.markers if m.ns == 'table']
+
+    assert plates(FREE) == []
+    assert plates(ARM) == pytest.approx([ROBOT_TABLE.height - 0.001, ROBOT_TABLE.floor - 0.001])

@@ -12,7 +12,7 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""RViz markers: failures as arrows, the planned end-effector path, samples of the map."""
+"""RViz markers: failures as arrows, the planned path, samples of the map, the table."""
 
 from __future__ import annotations
 
@@ -28,6 +28,8 @@ from visualization_msgs.msg import Marker, MarkerArray
 FRAME = 'lbr_link_0'
 ARROW_LENGTH = 0.05
 MAP_SAMPLES = 400
+#: [m] side of the square drawn for the table top about the base (the planner's is endless)
+TABLE_SIDE = 2.0
 
 
 def _point(x: np.ndarray) -> Point:
@@ -37,7 +39,7 @@ def _point(x: np.ndarray) -> Point:
 def markers_msg(arm: Arm, fmap: FailureMap, path: np.ndarray | None, clock,
                 seed: int = 0, reach: float = math.inf) -> MarkerArray:
     """
-    Build the marker array: failures, the planned path (if any) and map samples.
+    Build the marker array: failures, the planned path (if any), map samples and the table.
 
     The samples are coloured by the probability the planner prices (``reach``: its
     objective's, infinite for the paper's kernel).
@@ -75,6 +77,16 @@ def markers_msg(arm: Arm, fmap: FailureMap, path: np.ndarray | None, clock,
         cloud.colors = [ColorRGBA(r=float(p), g=0.0, b=float(1 - p), a=0.3 + 0.7 * float(p))
                         for p in prob]
         out.markers.append(cloud)
+    if arm.table is not None:    # the top, and the floor the planner keeps the arm above
+        for i, (z, alpha) in enumerate(((arm.table.height, 0.5), (arm.table.floor, 0.15))):
+            plate = Marker(type=Marker.CUBE, action=Marker.ADD, ns='table', id=i)
+            plate.header.frame_id, plate.header.stamp = FRAME, stamp
+            plate.pose.position = _point(np.array([0.0, 0.0, z - 0.001]))
+            plate.pose.orientation.w = 1.0
+            plate.scale.x = plate.scale.y = TABLE_SIDE
+            plate.scale.z = 0.002
+            plate.color = ColorRGBA(r=0.8, g=0.75, b=0.65, a=alpha)
+            out.markers.append(plate)
     return out
 
 
