@@ -21,7 +21,7 @@ from probdis_ros.motion.gravity import GravityModel
 from probdis_ros.motion.jtc import JtcTrajectory, TrajectoryCommand
 from probdis_ros.physics import PhysicsIiwa
 import pytest
-from test_physics import BAR, bar_scene, blocked_run, REST_CONFIGS
+from test_physics import BAR, bar_scene, blocked_run, FREE_SPACE, REST_CONFIGS
 
 HELD = np.array([0.0, 0.7, 0.0, -1.3, 0.0, 0.9, 0.0])
 
@@ -34,7 +34,7 @@ def hold(q):
 def test_the_gravity_model_is_the_torque_that_holds_the_physics_arm_and_its_load():
     load = GravityModel(load_mass=1.0, load_com=BAR['position'])
     bare = GravityModel()
-    arm = PhysicsIiwa(bar_scene(mass=1.0, box=False))
+    arm = PhysicsIiwa(bar_scene(mass=1.0, box=False), FREE_SPACE)
     for q in REST_CONFIGS:
         arm.reset(q)
         arm.advance(q, 0.05)

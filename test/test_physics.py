@@ -25,9 +25,10 @@ ARM = iiwa_arm()
 D_DIST = 0.04        # the planner's blocked threshold (L1 over joints)
 START = np.array([0.0, 0.7, 0.0, -1.3, 0.0, 0.9, 0.0])   # flange 0.66 m out, pointing down
 BAR = {'type': 'capsule', 'radius': 0.015, 'length': 0.13, 'position': [0, 0, 0.08]}
-# (the last two reach below the table top: the tests at rest run without it, in free space)
+# (the last two reach below the table top: tests at rest run in FREE_SPACE, without it)
 REST_CONFIGS = [np.zeros(7), START, np.array([1.0, -1.2, 2.0, 1.5, -2.0, 1.8, 3.0]),
                 np.array([-2.5, 1.9, -0.5, -2.0, 1.0, -1.9, -2.9])]
+FREE_SPACE = PhysicsSettings(table_height=None)
 
 
 def gap(setpoint, q):
@@ -176,7 +177,7 @@ def test_torques_never_exceed_the_urdf_efforts_even_when_the_law_asks_for_more()
 
 
 def test_measured_torque_at_rest_is_the_gravity_torque_and_external_torque_zero():
-    arm = PhysicsIiwa(bar_scene(mass=1.0, box=False), PhysicsSettings(table_height=None))
+    arm = PhysicsIiwa(bar_scene(mass=1.0, box=False), FREE_SPACE)
     for q in REST_CONFIGS:
         arm.reset(q)
         arm.advance(q, 0.05)

@@ -232,7 +232,7 @@ def test_replay_of_a_recorded_mock_run_finds_the_live_blocks(tmp_path, desired):
         t0 = reader.start_time
     assert live['jtc_start'] == ('desired' if desired else 'measured')
     result = replay(bag)
-    assert result.success == (live['state'] == 'succeeded')
+    assert result.success == (live['state'] == 'succeeded'), live.get('message')
     assert result.paths == live['paths'] and len(result.blocks) == live['failures']
     assert len(failures) == len(result.blocks) >= 1
     for (_, failure), block in zip(failures, result.blocks):
