@@ -178,9 +178,11 @@ def test_bad_goals_are_refused(ros, tmp_path):
     node = planner(ros, tmp_path)
     outside = GOAL.copy()
     outside[1] = 3.0
-    for bad in (outside.tolist(), GOAL[:6].tolist()):
+    in_the_table = [0.0, 1.9, 0.0, -0.5, 0.0, -1.5, 0.0]      # 0.14 m into the table top
+    for bad in (outside.tolist(), GOAL[:6].tolist(), in_the_table):
         result = node.set_parameters([Parameter('goal', value=bad)])[0]
         assert not result.successful and 'goal' in result.reason
+    assert 'below the table' in result.reason
     assert np.allclose(node.get_parameter('goal').value, GOAL)
 
 

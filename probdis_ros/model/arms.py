@@ -167,6 +167,13 @@ class Arm(ABC):
         """Return a boolean mask of the configurations the table allows (all without one)."""
         return np.ones(len(self.as_batch(configs)), dtype=bool)
 
+    def table_problem(self, config: np.ndarray) -> str:
+        """Return why the table does not allow config (a goal, a start), or '' if it does."""
+        if self.above_table(config)[0]:
+            return ''
+        return (f'takes the arm below the table (lowest point '
+                f'{self.lowest_heights(config)[0]:.3f} m, floor {self.table.floor:.3f} m)')
+
 
 class PlanarArm(Arm):
     """

@@ -200,10 +200,9 @@ class ProbRRT:
         t0 = time.perf_counter()
         here = self._checked(start, 'start')
         there = self._checked(goal, 'goal')
-        if not self.arm.above_table(there)[0]:
-            raise ValueError(f'goal configuration takes the arm below the table '
-                             f'(lowest point {self.arm.lowest_heights(there)[0]:.3f} m, floor '
-                             f'{self.arm.table.floor:.3f} m): {there}')
+        problem = self.arm.table_problem(there)
+        if problem:
+            raise ValueError(f'goal configuration {problem}: {there}')
         if np.array_equal(here, there):
             return Plan(here[None], 0.0)        # there already: no detour
         coster = self.objective.coster(self.arm, fmap, self.settings.delta, self.coster_type)

@@ -421,11 +421,7 @@ class PlannerNode(Node):
             return f'needs 7 values, has {goal.size}'
         if not np.all(np.isfinite(goal)) or not self.arm.within_limits(goal)[0]:
             return 'outside the joint limits'
-        if not self.arm.above_table(goal)[0]:
-            return (f'takes the arm below the table (lowest point '
-                    f'{self.arm.lowest_heights(goal)[0]:.3f} m, floor '
-                    f'{self.arm.table.floor:.3f} m)')
-        return ''
+        return self.arm.table_problem(goal)
 
     def _run_settings(self, changes: dict | None = None) -> RunSettings:
         """

@@ -87,10 +87,9 @@ class World:
             if not self.arm.within_limits(value)[0]:
                 raise ScenarioError(f'{name} is outside the joint limits of the '
                                     f'{self.arm.name} arm')
-            if not self.arm.above_table(value)[0]:
-                raise ScenarioError(f'{name} takes the arm below the table (lowest point '
-                                    f'{self.arm.lowest_heights(value)[0]:.3f} m, floor '
-                                    f'{self.table.floor:.3f} m)')
+            problem = self.arm.table_problem(value)
+            if problem:
+                raise ScenarioError(f'{name} {problem}')
             setattr(self, name, value)
         dim = self.arm.task_space.dim
         for i, obstacle in enumerate(self.obstacles):
