@@ -194,6 +194,11 @@ class Scene:
     source: str = ''
     object_only: bool = False
 
+    @property
+    def object_reach(self) -> float:
+        """Return the reach [m] of the grasped object about the flange point (0: none)."""
+        return self.grasped.reach if self.grasped is not None else 0.0
+
 
 # -- parsing ---------------------------------------------------------------------------------
 

@@ -149,8 +149,7 @@ def world_of(world: str, engine: str) -> tuple[Path, str, np.ndarray, float]:
     """
     if engine == 'physics':
         scene = load_scene(world)
-        reach = scene.grasped.reach if scene.grasped is not None else 0.0
-        return Path(scene.source or world), scene.name, scene.goal, reach
+        return Path(scene.source or world), scene.name, scene.goal, scene.object_reach
     path = scenario_path(world)
     scenario = load_world(path)
     return path, scenario.name or str(path), scenario.goal, 0.0
