@@ -21,7 +21,7 @@ Heavy modules are imported inside each handler so that ``probdis --help`` stays 
 from __future__ import annotations
 
 import argparse
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from dataclasses import replace
 import json
 import math
@@ -225,27 +225,45 @@ def cmd_experiment_report(args: argparse.Namespace) -> int:
     return 0
 
 
-def _detection_overrides(items: list[str]) -> dict[str, float]:
-    """Parse ``NAME=VALUE`` detector thresholds, refusing unknown names and bad values."""
-    from dataclasses import fields
-
-    from probdis_ros.motion.detector import DetectorSettings
-
-    known = {f.name for f in fields(DetectorSettings) if f.type in ('float', float)}
+def _name_values(flag: str, items: list[str] | None, known: Collection[str],
+                 what: str) -> dict[str, float]:
+    """Parse repeated ``NAME=VALUE`` options, refusing unknown names and values not numbers."""
     out = {}
     for item in items or []:
         name, _, value = item.partition('=')
         if name not in known:
-            raise UsageError(f'--detection {item!r}: not a detector threshold (one of '
-                             f'{", ".join(sorted(known))})')
+            raise UsageError(f'{flag} {item!r}: not {what} (one of {", ".join(known)})')
         try:
             out[name] = float(value)
         except ValueError:
-            raise UsageError(f'--detection {item!r}: {value!r} is not a number') from None
+            raise UsageError(f'{flag} {item!r}: {value!r} is not a number') from None
+    return out
+
+
+def _detection_overrides(items: list[str] | None) -> dict[str, float]:
+    """Parse ``--detection NAME=VALUE`` detector thresholds, refusing what the detector would."""
+    from dataclasses import fields
+
+    from probdis_ros.motion.detector import DetectorSettings
+
+    known = sorted(f.name for f in fields(DetectorSettings) if f.type in ('float', float))
+    out = _name_values('--detection', items, known, 'a detector threshold')
     try:
         DetectorSettings(**out)
     except ValueError as err:
         raise UsageError(f'--detection: {err}') from None
+    return out
+
+
+def _fault_overrides(items: list[str] | None) -> dict[str, float]:
+    """Parse ``--fault NAME=VALUE`` faults of the mock, refusing what the mock would."""
+    from probdis_ros.physics.simulated_robot import FAULTS, with_faults
+
+    out = _name_values('--fault', items, FAULTS, 'a fault of the mock')
+    try:
+        with_faults(out)
+    except ValueError as err:
+        raise UsageError(f'--fault: {err}') from None
     return out
 
 
@@ -311,13 +329,18 @@ def cmd_experiment_robot(args: argparse.Namespace) -> int:
     if args.offline and not physics:
         raise UsageError('--offline runs the physics scenes (--engine physics)')
     detection = _detection_overrides(args.detection)
+    faults = _fault_overrides(args.fault)
+    physical = {'object_mass_error', 'armature'} & set(faults)
+    if physical and not physics:
+        raise UsageError(f'--fault {sorted(physical)[0]}: a fault of the physics arm '
+                         '(--engine physics)')
     say = None if args.json else (lambda line: print(line, file=sys.stderr, flush=True))
     records = run_robot_experiment(Path(args.out), scenarios, methods, runs,
                                    args.velocity_scaling, args.timeout, say,
                                    engine=args.engine, sim_time=args.sim_time,
                                    real_time_factor=args.real_time_factor,
                                    offline=args.offline, detection=detection,
-                                   jtc_start=args.jtc_start)
+                                   jtc_start=args.jtc_start, faults=faults)
     # the runs asked for only: a DIR may hold more runs (an earlier --runs), other scenes
     # or methods
     wanted = {(s, str(m), r) for s in scenarios for m in methods for r in range(runs)}
@@ -1014,6 +1037,10 @@ def build_parser() -> argparse.ArgumentParser:
     robot.add_argument('--detection', action='append', metavar='NAME=VALUE',
                        help='a detector threshold for every run, e.g. gap_ceiling=0 '
                        '(repeatable; README "Parameters")')
+    robot.add_argument('--fault', action='append', metavar='NAME=VALUE',
+                       help="a fault of the mock in every run, by its node parameter's name: "
+                       'noise [rad], latency [s], object_mass_error [kg], armature [kg m^2] '
+                       '(repeatable; README "The mock iiwa")')
     _jtc_start_argument(robot)
     robot.add_argument('--json', action='store_true', help='print every run as JSON')
     robot.set_defaults(handler=cmd_experiment_robot)

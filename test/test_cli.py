@@ -299,8 +299,8 @@ def test_an_offline_run_that_fails_is_tried_again_offline(tmp_path, monkeypatch,
 
     calls = []
 
-    def flaky(scenario, method, run, velocity_scaling, detection, jtc_start):
-        calls.append((scenario, str(method), run))
+    def flaky(scenario, method, run, velocity_scaling, detection, jtc_start, faults):
+        calls.append((scenario, str(method), run, faults))
         if len(calls) == 1:
             raise RuntimeError('the simulation did not start')
         return {'success': True, 'paths': 2, 'failures': 1, 'bag': None}
@@ -308,10 +308,15 @@ def test_an_offline_run_that_fails_is_tried_again_offline(tmp_path, monkeypatch,
     monkeypatch.setattr(robot_experiment, 'offline_run', flaky)
     status = cli.main(['experiment', 'robot', '--offline', '--runs', '1', '--scenarios',
                        'demo_hook', '--methods', 'informed:af', '--out', str(tmp_path),
-                       '--json'])
-    assert status == 0 and calls == [('demo_hook', 'informed:af', 0)] * 2
+                       '--fault', 'latency=0.02', '--json'])
+    faults = {'latency': 0.02}
+    assert status == 0 and calls == [('demo_hook', 'informed:af', 0, faults)] * 2
     records = json.loads(capsys.readouterr().out)
-    assert [(r['success'], r['offline']) for r in records] == [(True, True)]
+    assert [(r['success'], r['offline'], r['faults']) for r in records] == [(True, True, faults)]
+    # a directory of runs with other faults is refused, naming them
+    status = cli.main(['experiment', 'robot', '--offline', '--runs', '1', '--scenarios',
+                       'demo_hook', '--methods', 'informed:af', '--out', str(tmp_path)])
+    assert status == 2 and "faults {'latency': 0.02}, not {}" in capsys.readouterr().err
 
 
 def test_the_robot_table_counts_only_the_runs_asked_for(tmp_path, monkeypatch, capsys):
@@ -352,7 +357,7 @@ def test_a_robot_run_of_the_bare_informed_of_before_is_run_again(
     (tmp_path / 'robot_runs.jsonl').write_text(json.dumps(old) + '\n')
     calls = []
 
-    def offline(scenario, method, run, velocity_scaling, detection, jtc_start):
+    def offline(scenario, method, run, velocity_scaling, detection, jtc_start, faults):
         calls.append((scenario, str(method), run))
         return {'success': True, 'paths': 2, 'failures': 1, 'bag': None}
 

@@ -292,6 +292,17 @@ def test_the_mock_runs_a_trajectory_stamped_on_its_own_clock(ros, tmp_path):
     wait_for(lambda: abs(arm.q[0] - goal[0]) < 0.01, 10, 'the arm at the goal')
 
 
+def test_the_physics_mock_takes_its_faults_from_its_parameters(ros):
+    arm = ros.add(MockIiwa(context=ros.context, parameter_overrides=[
+        Parameter('engine', value='physics'), Parameter('scene', value='demo_hook'),
+        Parameter('armature', value=0.3), Parameter('object_mass_error', value=0.1),
+        Parameter('latency', value=0.02), Parameter('noise', value=0.001)]))
+    robot = arm.robot
+    np.testing.assert_array_equal(robot.engine.model.dof_armature, [0.3] * 7)
+    assert robot.engine.settings.object_mass_error == 0.1
+    assert (robot.settings.latency, robot.settings.noise) == (0.02, 0.001)
+
+
 def test_a_full_run_against_the_physics_mock_learns_and_persists_failures(ros, tmp_path):
     # on simulated time: the planner follows the mock's /clock, so a busy machine slows the
     # run down instead of making the arm look late

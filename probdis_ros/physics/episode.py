@@ -32,6 +32,7 @@ import time
 import numpy as np
 from probdis_ros.model import iiwa_arm
 from probdis_ros.model.table import ROBOT_TABLE, Table
+from probdis_ros.physics.settings import PhysicsSettings
 from probdis_ros.physics.simulated_robot import build_robot, RobotSettings
 from probdis_ros.planning import Disentangler, Method, RRTSettings, State
 from probdis_ros.planning.disentangle import DEFAULT_MIN_RETREAT
@@ -80,6 +81,7 @@ def run_physics_episode(scene: str, method: str | Method = 'probabilistic', seed
                         max_paths: int = 20, rrt: RRTSettings | None = None,
                         run_settings: RunSettings | None = None,
                         robot_settings: RobotSettings | None = None,
+                        physics_settings: PhysicsSettings | None = None,
                         time_limit: float = 600.0, goal_tolerance: float = 0.04,
                         min_retreat: float = DEFAULT_MIN_RETREAT,
                         table: Table | None = ROBOT_TABLE) -> PhysicsEpisode:
@@ -87,14 +89,16 @@ def run_physics_episode(scene: str, method: str | Method = 'probabilistic', seed
     Disentangle a physics scene from its start to its goal; reproducible from seed.
 
     The planner keeps the arm and the grasped object (a ball about the flange point that
-    holds it) above ``table``, as the planner node does with its parameters.
+    holds it) above ``table``, as the planner node does with its parameters.  The driver and
+    the physics arm run with ``robot_settings`` and ``physics_settings`` (their defaults:
+    the ideal mock, JTC as ``run_settings`` models it).
     """
     wall = time.perf_counter()
     method = Method.resolve(method) if isinstance(method, str) else method
     if robot_settings is None and run_settings is not None:
         # JTC as the run models it
         robot_settings = RobotSettings(jtc_start=run_settings.jtc_start)
-    robot, _ = build_robot('physics', scene, robot_settings)
+    robot, _ = build_robot('physics', scene, robot_settings, physics_settings)
     scene_doc = robot.engine.scene
     arm = iiwa_arm().on_table(table, scene_doc.object_reach if table else 0.0)
     fmap = method.failure_map(arm.task_space)

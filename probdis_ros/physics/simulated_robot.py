@@ -44,7 +44,8 @@ No rclpy: the mock node and ``probdis sim --engine physics`` both drive this cla
 from __future__ import annotations
 
 from collections import deque
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
 import math
 from pathlib import Path
 from typing import Protocol, TYPE_CHECKING
@@ -64,6 +65,7 @@ from probdis_ros.sim.compliant_arm import CompliantArm
 
 if TYPE_CHECKING:
     from probdis_ros.physics.scene import Scene
+    from probdis_ros.physics.settings import PhysicsSettings
 
 
 class Engine(Protocol):
@@ -262,13 +264,43 @@ class SimulatedRobot:
 ENGINES = ('physics', 'kinematic')
 
 
+#: What a real setup adds to the ideal mock, by the mock node's parameter names: the
+#: driver's joint-state ``noise`` [rad] and ``latency`` [s] (RobotSettings), the load model's
+#: ``object_mass_error`` [kg] and the motors' reflected inertia ``armature`` [kg m^2, every
+#: joint] (PhysicsSettings; the physics arm only).
+FAULTS = ('noise', 'latency', 'object_mass_error', 'armature')
+
+
+def with_faults(faults: Mapping[str, float], settings: RobotSettings | None = None
+                ) -> tuple[RobotSettings, PhysicsSettings]:
+    """
+    Return the driver's and the physics arm's settings with ``faults`` (names of FAULTS) in.
+
+    Raises ValueError naming an unknown fault or a value the settings refuse.
+    """
+    from probdis_ros.physics.settings import PhysicsSettings
+
+    unknown = sorted(set(faults) - set(FAULTS))
+    if unknown:
+        raise ValueError(f'no fault {unknown[0]!r} (one of {", ".join(FAULTS)})')
+    robot = replace(settings or RobotSettings(),
+                    **{k: float(v) for k, v in faults.items() if k in ('noise', 'latency')})
+    physics = PhysicsSettings()
+    if 'object_mass_error' in faults:
+        physics = replace(physics, object_mass_error=float(faults['object_mass_error']))
+    if 'armature' in faults:
+        physics = replace(physics, armature=(float(faults['armature']),) * 7)
+    return robot, physics
+
+
 def build_robot(engine: str, world: str | Path | Scene, settings: RobotSettings | None = None,
-                object_mass_error: float = 0.0) -> tuple[SimulatedRobot, str]:
+                physics: PhysicsSettings | None = None) -> tuple[SimulatedRobot, str]:
     """
     Return a robot at the start of a world, and a line describing it.
 
-    world is a physics scene (a Scene, a file or a name in config/scenes/) for ``physics``,
-    a kinematic scenario (file or name in config/scenarios/) for ``kinematic``.
+    world is a physics scene (a Scene, a file or a name in config/scenes/) for ``physics``
+    (moved by the physics arm with ``physics``'s settings), a kinematic scenario (file or
+    name in config/scenarios/) for ``kinematic``.
     """
     settings = settings or RobotSettings()
     if engine == 'kinematic':
@@ -285,7 +317,7 @@ def build_robot(engine: str, world: str | Path | Scene, settings: RobotSettings 
     if engine == 'physics':
         from probdis_ros.physics import load_scene, PhysicsIiwa, PhysicsSettings
         scene = load_scene(world) if isinstance(world, (str, Path)) else world
-        physics = PhysicsIiwa(scene, PhysicsSettings(object_mass_error=object_mass_error))
-        robot = SimulatedRobot(physics, scene.start, settings)
+        robot = SimulatedRobot(PhysicsIiwa(scene, physics or PhysicsSettings()), scene.start,
+                               settings)
         return robot, f'scene {scene.name} with {len(scene.obstacles)} hidden obstacles'
     raise ValueError(f'engine must be one of {", ".join(ENGINES)}, got {engine!r}')

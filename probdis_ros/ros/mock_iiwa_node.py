@@ -30,8 +30,8 @@ chooses the arm:
 With ``sim_time`` the mock runs on simulated time: it publishes ``/clock`` and runs
 ``real_time_factor`` times faster than the wall clock (0: as fast as it can), so a planner
 started with ``use_sim_time:=true`` can be tested many times faster than real time.
-Optional faults: joint-state noise, latency, the "echo" of a driver in open loop, and a
-load-model error of the physics arm.
+Optional faults: joint-state noise, latency, the "echo" of a driver in open loop, and of
+the physics arm a load-model error and the motors' reflected inertia (``armature``).
 """
 
 from __future__ import annotations
@@ -44,11 +44,14 @@ from builtin_interfaces.msg import Time
 import numpy as np
 from probdis_ros.model import iiwa_arm
 from probdis_ros.motion.jtc import DEFAULT_JTC_START
+from probdis_ros.physics.settings import PhysicsSettings
 from probdis_ros.physics.simulated_robot import (
     build_robot,
     ENGINES,
+    FAULTS,
     JointStateSample,
     RobotSettings,
+    with_faults,
 )
 from probdis_ros.ros import MOCK_NODE
 from probdis_ros.ros.markers import scene_markers
@@ -94,6 +97,9 @@ class MockIiwa(Node):
             'or from the measured state (false, its default)'))
         p('object_mass_error', 0.0, _describe('real minus assumed object mass [kg]',
                                               -5.0, 5.0))
+        p('armature', PhysicsSettings().armature[0], _describe(
+            "the motors' reflected inertia, every joint [kg m^2] (not published by KUKA)",
+            0.0, 10.0))
         p('sim_time', False, _describe('run on simulated time and publish /clock'))
         p('real_time_factor', 5.0, _describe('with sim_time: speed over the wall clock '
                                              '(at most); 0: as fast as possible', 0.0, 1000.0))
@@ -106,14 +112,13 @@ class MockIiwa(Node):
             raise ValueError(f'engine must be one of {", ".join(ENGINES)}, '
                              f'got {value("engine")!r}')
         self.arm = iiwa_arm()
-        settings = RobotSettings(period=1.0 / value('rate'), noise=value('noise'),
-                                 latency=value('latency'), echo=value('echo'),
-                                 seed=value('seed'),
-                                 jtc_start='desired' if value('interpolate_from_desired_state')
-                                 else 'measured')
+        settings, physics = with_faults(
+            {name: value(name) for name in FAULTS},
+            RobotSettings(period=1.0 / value('rate'), echo=value('echo'), seed=value('seed'),
+                          jtc_start='desired' if value('interpolate_from_desired_state')
+                          else 'measured'))
         world = value('scene') if value('engine') == 'physics' else value('scenario')
-        self.robot, self.description = build_robot(
-            value('engine'), world, settings, object_mass_error=value('object_mass_error'))
+        self.robot, self.description = build_robot(value('engine'), world, settings, physics)
         self.sim_time = bool(value('sim_time'))
         self.factor = float(value('real_time_factor'))
         # simulated time starts at the wall clock, so stamps and bags read as real dates

@@ -93,29 +93,34 @@ def planner_arguments(method: Method, seed: int, velocity_scaling: float) -> lis
     return args
 
 
-def detection_arguments(detection: dict[str, float]) -> list[str]:
-    """Return the planner node's ROS arguments that set detector thresholds."""
+def float_arguments(values: dict[str, float]) -> list[str]:
+    """Return ROS arguments that set a node's float parameters (detector thresholds, faults)."""
     args: list[str] = []
-    for name, value in detection.items():
+    for name, value in values.items():
         args += ['-p', f'{name}:={float(value)}']
     return args
 
 
 def offline_run(scenario: str, method: Method, run: int, velocity_scaling: float,
-                detection: dict[str, float], jtc_start: str = DEFAULT_JTC_START) -> dict:
+                detection: dict[str, float], jtc_start: str = DEFAULT_JTC_START,
+                faults: dict[str, float] | None = None) -> dict:
     """
     Run one disentangling without DDS: the planner node's Run against JTC, filter and MuJoCo.
 
-    Deterministic (the run index seeds the planner; simulated time stands still while it
-    plans) and blind to the machine's load: the honest table when the nodes cannot keep up.
+    Deterministic (the run index seeds the planner and the joint-state noise; simulated time
+    stands still while it plans) and blind to the machine's load: the honest table when the
+    nodes cannot keep up.  ``faults``: the mock's (:data:`FAULTS`), as the node takes them.
     """
     from probdis_ros.motion.detector import DetectorSettings
     from probdis_ros.physics.episode import run_physics_episode
+    from probdis_ros.physics.simulated_robot import RobotSettings, with_faults
     from probdis_ros.run import RunSettings
 
     settings = RunSettings(velocity_scaling=velocity_scaling,
                            detection=DetectorSettings(**detection), jtc_start=jtc_start)
-    episode = run_physics_episode(scenario, str(method), seed=run, run_settings=settings)
+    robot, physics = with_faults(faults or {}, RobotSettings(jtc_start=jtc_start, seed=run))
+    episode = run_physics_episode(scenario, str(method), seed=run, run_settings=settings,
+                                  robot_settings=robot, physics_settings=physics)
     summary = episode.summary()
     return {'success': summary['success'], 'paths': summary['paths'],
             'failures': summary['failures'], 'bag': None, 'message': summary['message'],
@@ -127,7 +132,7 @@ def offline_run(scenario: str, method: Method, run: int, velocity_scaling: float
 
 #: The value of a run setting (engine, velocity_scaling, offline, detection) in records
 #: written before it was kept (none: not compared).
-LEGACY_SETTINGS = {'offline': False, 'detection': {}, 'jtc_start': 'measured'}
+LEGACY_SETTINGS = {'offline': False, 'detection': {}, 'jtc_start': 'measured', 'faults': {}}
 
 
 def check_settings(path: Path, records: list[dict], settings: dict) -> None:
@@ -152,7 +157,8 @@ def run_robot_experiment(out: Path, scenarios: list[str], methods: list[Method],
                          engine: str = 'physics', sim_time: bool = True,
                          real_time_factor: float = 1.0, offline: bool = False,
                          detection: dict[str, float] | None = None,
-                         jtc_start: str = DEFAULT_JTC_START) -> list[dict]:
+                         jtc_start: str = DEFAULT_JTC_START,
+                         faults: dict[str, float] | None = None) -> list[dict]:
     """
     Run what is missing of scenarios x methods x runs; return every record of DIR.
 
@@ -160,11 +166,14 @@ def run_robot_experiment(out: Path, scenarios: list[str], methods: list[Method],
     the mock runs on simulated time, real_time_factor times faster than the wall clock.
     ``offline`` runs each physics scene without the nodes (:func:`offline_run`);
     ``detection`` overrides detector thresholds (``DetectorSettings`` fields) either way;
-    ``jtc_start`` is where the controller starts a command (and the planner models it).
+    ``jtc_start`` is where the controller starts a command (and the planner models it);
+    ``faults`` are the mock's (:data:`~probdis_ros.physics.simulated_robot.FAULTS`: noise,
+    latency, load-model error, armature) in every run.
     """
     detection = dict(detection or {})
+    faults = dict(faults or {})
     settings = {'engine': engine, 'velocity_scaling': velocity_scaling, 'offline': offline,
-                'detection': detection, 'jtc_start': jtc_start}
+                'detection': detection, 'jtc_start': jtc_start, 'faults': faults}
 
     out.mkdir(parents=True, exist_ok=True)
     path = out / RUNS_FILE
@@ -180,13 +189,15 @@ def run_robot_experiment(out: Path, scenarios: list[str], methods: list[Method],
     def one_run(scenario: str, method: Method, run: int) -> dict:
         """Run once, offline or through the nodes: a retry goes the same way."""
         if offline:     # any method: no planner node, whose parameters limit it
-            return offline_run(scenario, method, run, velocity_scaling, detection, jtc_start)
+            return offline_run(scenario, method, run, velocity_scaling, detection, jtc_start,
+                               faults)
         from probdis_ros.ros.demo import run_demo
 
         args = (*planner_arguments(method, run, velocity_scaling),
-                *detection_arguments(detection), '-p', f'bag_dir:={out / "bags"}')
+                *float_arguments(detection), '-p', f'bag_dir:={out / "bags"}')
         return run_demo(scenario, timeout, quiet=True, extra_planner_args=args,
-                        jtc_start=jtc_start, **world_args)
+                        extra_mock_args=tuple(float_arguments(faults)), jtc_start=jtc_start,
+                        **world_args)
 
     with path.open('a') as stream:
         for number, (scenario, method, run) in enumerate(todo, start=1):
@@ -205,7 +216,7 @@ def run_robot_experiment(out: Path, scenarios: list[str], methods: list[Method],
                       'success': result['success'], 'paths': result['paths'],
                       'failures': result['failures'], 'wall_s': time.monotonic() - t0,
                       'bag': result['bag'], 'offline': offline, 'detection': detection,
-                      'jtc_start': jtc_start}
+                      'jtc_start': jtc_start, 'faults': faults}
             for name in ('peak_contact_force_n', 'sim_time_s', 'message', 'command_speed_peak',
                          'sent_speed_peak'):
                 if name in result:
