@@ -313,6 +313,7 @@ def _robot_worlds(args: argparse.Namespace) -> tuple[list[str], dict[str, list[s
 
 def cmd_experiment_robot(args: argparse.Namespace) -> int:
     """Run the robot scenarios through the ROS nodes against the mock iiwa (Table I)."""
+    from probdis_ros.physics.simulated_robot import PHYSICS_FAULTS
     from probdis_ros.ros.robot_experiment import robot_table, run_robot_experiment
     from probdis_ros.run import MAX_VELOCITY_SCALING
 
@@ -330,7 +331,7 @@ def cmd_experiment_robot(args: argparse.Namespace) -> int:
         raise UsageError('--offline runs the physics scenes (--engine physics)')
     detection = _detection_overrides(args.detection)
     faults = _fault_overrides(args.fault)
-    physical = {'object_mass_error', 'armature'} & set(faults)
+    physical = set(PHYSICS_FAULTS) & set(faults)
     if physical and not physics:
         raise UsageError(f'--fault {sorted(physical)[0]}: a fault of the physics arm '
                          '(--engine physics)')
@@ -1039,8 +1040,8 @@ def build_parser() -> argparse.ArgumentParser:
                        '(repeatable; README "Parameters")')
     robot.add_argument('--fault', action='append', metavar='NAME=VALUE',
                        help="a fault of the mock in every run, by its node parameter's name: "
-                       'noise [rad], latency [s], object_mass_error [kg], armature [kg m^2] '
-                       '(repeatable; README "The mock iiwa")')
+                       'noise [rad], latency [s], object_mass_error [kg], armature [kg m^2], '
+                       'grasp_stiffness [Nm/rad] (repeatable; README "Parameters")')
     _jtc_start_argument(robot)
     robot.add_argument('--json', action='store_true', help='print every run as JSON')
     robot.set_defaults(handler=cmd_experiment_robot)

@@ -242,3 +242,28 @@ def test_settings_refuse_values_the_simulation_cannot_run_with():
                 {'timestep': 0.004, 'contact_timeconst': 0.005}):
         with pytest.raises(ValueError):
             PhysicsSettings(**bad)
+
+
+def _object_turn_in_grasp(arm):
+    """Return the angle [rad] between the object's frame and the flange's."""
+    from probdis_ros.physics.model import OBJECT_BODY
+    relative = arm.flange_pose()[1].T @ arm.data.body(OBJECT_BODY).xmat.reshape(3, 3)
+    return float(np.arccos(np.clip((np.trace(relative) - 1) / 2, -1.0, 1.0)))
+
+
+def test_a_grasp_that_gives_turns_the_object_when_pressed_and_a_welded_one_does_not():
+    goal = START + np.array([0, 0.25, 0, 0, 0, 0, 0])       # the bar's tip into the slab
+    turns, forces = {}, {}
+    for stiffness in (0.0, 20.0):
+        arm = PhysicsIiwa(bar_scene(), PhysicsSettings(grasp_stiffness=stiffness))
+        assert arm.model.nv == 7 + (3 if stiffness else 0)
+        ramp(arm, START, goal, 1.0)
+        arm.advance(goal, 0.5)
+        turns[stiffness] = _object_turn_in_grasp(arm)
+        forces[stiffness] = np.abs(arm.tau_external).max()
+        assert arm.q.shape == (7,)
+    assert turns[0.0] < 1e-9 and forces[0.0] > 1.0                 # pressed, not turned
+    # pressed, the spring gives: about torque / stiffness (a few degrees at 20 Nm/rad)
+    assert 0.02 < turns[20.0] < 0.5
+    with pytest.raises(ValueError, match='grasp_stiffness'):
+        PhysicsSettings(grasp_stiffness=-1.0)

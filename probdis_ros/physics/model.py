@@ -27,7 +27,10 @@ The impedance controller lives in the model, so that many physics steps run in C
 * gravity compensation is MuJoCo's ``gravcomp`` on every moving body, routed through the
   joints' actuators (``actuatorgravcomp``) so that the total is clipped to the URDF effort
   (``actuatorfrcrange``) like the real drive's torque; on the grasped object it is the
-  controller's assumed share of the real mass, which models a load-data error.
+  controller's assumed share of the real mass, which models a load-data error;
+* the grasped object is welded to the flange, or (``grasp_stiffness`` > 0) held by three
+  damped spring hinges at the flange, so that it turns in the grasp when pressed (its
+  weight is compensated at those hinges too: it does not sag).
 
 Collision filter: robot and object geoms (contype 1, conaffinity 0) collide only with scene
 geoms (contype 0, conaffinity 1); no self-collision and no clutter-on-clutter contacts.  The
@@ -227,10 +230,31 @@ def _robot_geoms(link: UrdfLink, rgba: str) -> list[str]:
             for i, shape in enumerate(link.collisions)]
 
 
-def _object_body(scene: Scene, gravcomp: float) -> list[str]:
+#: The grasp's damping ratio, with stiffness ``PhysicsSettings.grasp_stiffness``.
+GRASP_DAMPING_RATIO = 0.7
+
+
+def _grasp_joints(scene: Scene, stiffness: float) -> list[str]:
+    """
+    Return three spring hinges at the flange about its axes: the object turns in the grasp.
+
+    Damped at GRASP_DAMPING_RATIO for an inertia of mass x reach^2 / 3 (a rod held at its
+    end, about the object's own); none for a rigid grasp (stiffness 0).
+    """
+    if stiffness <= 0:
+        return []
+    inertia = scene.grasped.mass * scene.object_reach ** 2 / 3
+    damping = 2 * GRASP_DAMPING_RATIO * np.sqrt(stiffness * inertia)
+    return [f'  <joint name="grasp_{axis}" type="hinge" axis="{_f(np.eye(3)[i])}" '
+            f'stiffness="{_f(stiffness)}" damping="{_f(damping)}"/>'
+            for i, axis in enumerate('xyz')]
+
+
+def _object_body(scene: Scene, gravcomp: float, grasp_stiffness: float) -> list[str]:
     grasped = scene.grasped
     volume = sum(s.volume for s in grasped.shapes)
-    lines = [f'<body name="{OBJECT_BODY}" gravcomp="{_f(gravcomp)}">']
+    lines = [f'<body name="{OBJECT_BODY}" gravcomp="{_f(gravcomp)}">',
+             *_grasp_joints(scene, grasp_stiffness)]
     for i, shape in enumerate(grasped.shapes):
         name = shape.name or f'object/{i}'
         lines.append(f'  <geom name="{name}" {_geom_attrs(shape)} '
@@ -329,7 +353,8 @@ def build_mjcf(scene: Scene | None = None, settings: PhysicsSettings | None = No
         closing += 1
     body_lines.append(f'<site name="{FLANGE}" size="0.005"/>')
     if scene is not None and scene.grasped is not None:
-        body_lines += _object_body(scene, object_gravcomp(scene, settings))
+        body_lines += _object_body(scene, object_gravcomp(scene, settings),
+                                   settings.grasp_stiffness)
     body_lines += ['</body>'] * closing
     actuators = [
         f'<general name="{j.name}" joint="{j.name}" gaintype="fixed" biastype="affine" '

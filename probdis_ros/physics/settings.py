@@ -41,6 +41,9 @@ class PhysicsSettings:
     #: limit cycle of an explicit PD (DESIGN.md "Facts: a physics-simulated iiwa"): measured
     #: stable with 0 too, at 1 and 2 ms.
     armature: tuple[float, ...] = (0.01,) * 7
+    #: Rotational stiffness of the grasp [Nm/rad] about each flange axis: the object turns
+    #: in the gripper when pressed; 0: welded to the flange (the planner's assumption).
+    grasp_stiffness: float = 0.0
     #: Sliding friction coefficient between the robot (and object) and the scene.
     friction: float = 0.5
     #: Friction that holds under sustained load: MuJoCo's elliptic friction cones with this
@@ -63,6 +66,8 @@ class PhysicsSettings:
             raise ValueError('stiffness must be 7 positive values (Nm/rad)')
         if len(self.armature) != 7 or min(self.armature) < 0:
             raise ValueError('armature must be 7 values >= 0 (kg m^2)')
+        if not self.grasp_stiffness >= 0:
+            raise ValueError('grasp_stiffness must be >= 0 (Nm/rad; 0: a rigid grasp)')
         if self.damping_ratio < 0:
             raise ValueError('damping_ratio must be >= 0')
         if not 0 < self.timestep <= 0.01:

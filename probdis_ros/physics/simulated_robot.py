@@ -266,9 +266,12 @@ ENGINES = ('physics', 'kinematic')
 
 #: What a real setup adds to the ideal mock, by the mock node's parameter names: the
 #: driver's joint-state ``noise`` [rad] and ``latency`` [s] (RobotSettings), the load model's
-#: ``object_mass_error`` [kg] and the motors' reflected inertia ``armature`` [kg m^2, every
-#: joint] (PhysicsSettings; the physics arm only).
-FAULTS = ('noise', 'latency', 'object_mass_error', 'armature')
+#: ``object_mass_error`` [kg], the motors' reflected inertia ``armature`` [kg m^2, every
+#: joint] and a grasp that gives, ``grasp_stiffness`` [Nm/rad] (PhysicsSettings; the
+#: physics arm only).
+FAULTS = ('noise', 'latency', 'object_mass_error', 'armature', 'grasp_stiffness')
+#: The faults of the physics arm alone.
+PHYSICS_FAULTS = ('object_mass_error', 'armature', 'grasp_stiffness')
 
 
 def with_faults(faults: Mapping[str, float], settings: RobotSettings | None = None
@@ -285,9 +288,8 @@ def with_faults(faults: Mapping[str, float], settings: RobotSettings | None = No
         raise ValueError(f'no fault {unknown[0]!r} (one of {", ".join(FAULTS)})')
     robot = replace(settings or RobotSettings(),
                     **{k: float(v) for k, v in faults.items() if k in ('noise', 'latency')})
-    physics = PhysicsSettings()
-    if 'object_mass_error' in faults:
-        physics = replace(physics, object_mass_error=float(faults['object_mass_error']))
+    physics = replace(PhysicsSettings(), **{k: float(v) for k, v in faults.items()
+                                            if k in ('object_mass_error', 'grasp_stiffness')})
     if 'armature' in faults:
         physics = replace(physics, armature=(float(faults['armature']),) * 7)
     return robot, physics

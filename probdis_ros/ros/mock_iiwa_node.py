@@ -100,6 +100,9 @@ class MockIiwa(Node):
         p('armature', PhysicsSettings().armature[0], _describe(
             "the motors' reflected inertia, every joint [kg m^2] (not published by KUKA)",
             0.0, 10.0))
+        p('grasp_stiffness', 0.0, _describe('the grasp turns the object by torque / this '
+                                            '[Nm/rad]; 0: the object is welded to the flange',
+                                            0.0, 1e5))
         p('sim_time', False, _describe('run on simulated time and publish /clock'))
         p('real_time_factor', 5.0, _describe('with sim_time: speed over the wall clock '
                                              '(at most); 0: as fast as possible', 0.0, 1000.0))
