@@ -313,11 +313,23 @@ def _robot_worlds(args: argparse.Namespace) -> tuple[list[str], dict[str, list[s
 
 def cmd_experiment_robot(args: argparse.Namespace) -> int:
     """Run the robot scenarios through the ROS nodes against the mock iiwa (Table I)."""
+    from probdis_ros.experiments.sweep import read_episodes
     from probdis_ros.physics.simulated_robot import PHYSICS_FAULTS
-    from probdis_ros.ros.robot_experiment import robot_table, run_robot_experiment
+    from probdis_ros.ros.robot_experiment import (
+        paired_table,
+        robot_table,
+        run_robot_experiment,
+        RUNS_FILE,
+    )
     from probdis_ros.run import MAX_VELOCITY_SCALING
 
     scenarios, groups = _robot_worlds(args)
+    baseline = None
+    if args.against is not None:
+        if not (Path(args.against) / RUNS_FILE).is_file():
+            raise UsageError(f'--against {args.against}: no {RUNS_FILE} there (the --out of '
+                             'another robot experiment)')
+        baseline = read_episodes(Path(args.against) / RUNS_FILE)
     physics = args.engine == 'physics'
     methods = _methods(args.methods)
     _positive(args.timeout, '--timeout')
@@ -350,6 +362,9 @@ def cmd_experiment_robot(args: argparse.Namespace) -> int:
         _print_json(records)
     else:
         print(robot_table(records, scenarios, [str(m) for m in methods], groups), end='')
+        if baseline is not None:
+            print(f'\nagainst the same runs in {args.against}:')
+            print(paired_table(records, baseline, [str(m) for m in methods]), end='')
         print(f'runs and bags in {args.out}')
     return 0
 
@@ -1042,6 +1057,9 @@ def build_parser() -> argparse.ArgumentParser:
                        help="a fault of the mock in every run, by its node parameter's name: "
                        'noise [rad], latency [s], object_mass_error [kg], armature [kg m^2], '
                        'grasp_stiffness [Nm/rad] (repeatable; README "Parameters")')
+    robot.add_argument('--against', metavar='DIR', help="compare with the same runs in "
+                       "another experiment's DIR (another setting, fault or commit): paired "
+                       'by scene, method and run, with a bootstrap interval')
     _jtc_start_argument(robot)
     robot.add_argument('--json', action='store_true', help='print every run as JSON')
     robot.set_defaults(handler=cmd_experiment_robot)

@@ -344,6 +344,19 @@ def test_the_robot_table_counts_only_the_runs_asked_for(tmp_path, monkeypatch, c
     assert cli.main(args) == 0
     assert '| demo_hook | 0 / 1 |' in capsys.readouterr().out
 
+    # --against: the same runs of another experiment, paired run by run (the runs there
+    # beyond those asked for are left out: run 0 only)
+    other = tmp_path / 'other'
+    other.mkdir()
+    (other / 'robot_runs.jsonl').write_text(
+        ''.join(json.dumps({**record(run, True), 'paths': 5}) + '\n' for run in range(3)))
+    args[args.index('--runs') + 1] = '2'
+    assert cli.main([*args, '--against', str(other)]) == 0
+    out = capsys.readouterr().out
+    assert '| probabilistic | 2 | 1 / 2 | -0.500 (-1.000 to +0.000) | 0 / 1 | 3.0 / 5.0 |' in out
+    assert cli.main([*args, '--against', str(tmp_path / 'none')]) == 2
+    assert 'no robot_runs.jsonl there' in capsys.readouterr().err
+
 
 def test_a_robot_run_of_the_bare_informed_of_before_is_run_again(
         tmp_path, monkeypatch, capsys):

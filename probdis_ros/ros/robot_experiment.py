@@ -284,3 +284,41 @@ def robot_table(records: list[dict], scenarios: list[str], methods: list[str],
         lines.append(f'\n{len(left_out)} run(s) left out: the planner fell behind the '
                      f'simulation (joint states missed)')
     return '\n'.join(lines) + '\n'
+
+
+def paired_table(records: list[dict], baseline: list[dict], methods: list[str]) -> str:
+    """
+    Return Markdown comparing each method's runs with the same runs of ``baseline``.
+
+    Runs pair by (scenario, method, run), valid ones only; per method: the runs both hold,
+    the share disentangled in each, the mean difference with a paired 95 % percentile-
+    bootstrap interval (the pairs resampled, as the sweeps' reports do), the runs won and
+    lost, and the mean paths over the runs both got out of.
+    """
+    from probdis_ros.experiments.report import bootstrap_ci
+
+    def key(record: dict) -> tuple:
+        return record['scenario'], record['method'], record.get('run')
+
+    theirs = {key(r): r for r in baseline if valid(r)}
+    lines = ['| method | runs in both | disentangled: these / baseline | difference (paired 95 % '
+             'CI) | won / lost | mean paths where both got out: these / baseline |',
+             '| --- | --- | --- | --- | --- | --- |']
+    for method in methods:
+        pairs = sorted(((key(r), r, theirs[key(r)]) for r in records
+                        if valid(r) and r['method'] == method and key(r) in theirs),
+                       key=lambda pair: pair[0])
+        if not pairs:
+            lines.append(f'| {method} | 0 | - | - | - | - |')
+            continue
+        diffs = np.array([float(a['success']) - float(b['success']) for _, a, b in pairs])
+        low, high = bootstrap_ci(diffs)
+        both = [(a['paths'], b['paths']) for _, a, b in pairs if a['success'] and b['success']]
+        paths = (f'{statistics.fmean(a for a, _ in both):.1f} / '
+                 f'{statistics.fmean(b for _, b in both):.1f}') if both else '-'
+        ours = sum(a['success'] for _, a, _ in pairs)
+        base = sum(b['success'] for _, _, b in pairs)
+        lines.append(f'| {method} | {len(pairs)} | {ours} / {base} | {diffs.mean():+.3f} '
+                     f'({low:+.3f} to {high:+.3f}) | {int((diffs > 0).sum())} / '
+                     f'{int((diffs < 0).sum())} | {paths} |')
+    return '\n'.join(lines) + '\n'
