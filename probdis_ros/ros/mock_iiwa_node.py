@@ -31,7 +31,8 @@ With ``sim_time`` the mock runs on simulated time: it publishes ``/clock`` and r
 ``real_time_factor`` times faster than the wall clock (0: as fast as it can), so a planner
 started with ``use_sim_time:=true`` can be tested many times faster than real time.
 Optional faults: joint-state noise, latency, the "echo" of a driver in open loop, and of
-the physics arm a load-model error and the motors' reflected inertia (``armature``).
+the physics arm a load-model error, the motors' reflected inertia (``armature``) and a
+grasp that gives (``grasp_stiffness``).
 """
 
 from __future__ import annotations
@@ -100,9 +101,9 @@ class MockIiwa(Node):
         p('armature', PhysicsSettings().armature[0], _describe(
             "the motors' reflected inertia, every joint [kg m^2] (not published by KUKA)",
             0.0, 10.0))
-        p('grasp_stiffness', 0.0, _describe('the grasp turns the object by torque / this '
-                                            '[Nm/rad]; 0: the object is welded to the flange',
-                                            0.0, 1e5))
+        p('grasp_stiffness', PhysicsSettings().grasp_stiffness, _describe(
+            'the grasp turns the object by torque / this [Nm/rad]; 0: the object is welded '
+            'to the flange', 0.0, 1e5))
         p('sim_time', False, _describe('run on simulated time and publish /clock'))
         p('real_time_factor', 5.0, _describe('with sim_time: speed over the wall clock '
                                              '(at most); 0: as fast as possible', 0.0, 1000.0))

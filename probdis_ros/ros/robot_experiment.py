@@ -109,7 +109,8 @@ def offline_run(scenario: str, method: Method, run: int, velocity_scaling: float
 
     Deterministic (the run index seeds the planner and the joint-state noise; simulated time
     stands still while it plans) and blind to the machine's load: the honest table when the
-    nodes cannot keep up.  ``faults``: the mock's (:data:`FAULTS`), as the node takes them.
+    nodes cannot keep up.  ``faults``: the mock's
+    (:data:`~probdis_ros.physics.simulated_robot.FAULTS`), as its node takes them.
     """
     from probdis_ros.motion.detector import DetectorSettings
     from probdis_ros.physics.episode import run_physics_episode
@@ -130,8 +131,8 @@ def offline_run(scenario: str, method: Method, run: int, velocity_scaling: float
             'sim_time_s': summary['sim_time_s']}
 
 
-#: The value of a run setting (engine, velocity_scaling, offline, detection) in records
-#: written before it was kept (none: not compared).
+#: The value of a run setting (engine, velocity_scaling, offline, detection, jtc_start,
+#: faults) in records written before it was kept (none: not compared).
 LEGACY_SETTINGS = {'offline': False, 'detection': {}, 'jtc_start': 'measured', 'faults': {}}
 
 
@@ -167,8 +168,8 @@ def run_robot_experiment(out: Path, scenarios: list[str], methods: list[Method],
     ``offline`` runs each physics scene without the nodes (:func:`offline_run`);
     ``detection`` overrides detector thresholds (``DetectorSettings`` fields) either way;
     ``jtc_start`` is where the controller starts a command (and the planner models it);
-    ``faults`` are the mock's (:data:`~probdis_ros.physics.simulated_robot.FAULTS`: noise,
-    latency, load-model error, armature) in every run.
+    ``faults`` are the mock's (by the names of
+    :data:`~probdis_ros.physics.simulated_robot.FAULTS`) in every run.
     """
     detection = dict(detection or {})
     faults = dict(faults or {})
