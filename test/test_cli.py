@@ -161,13 +161,16 @@ def test_plan_prints_a_path_on_a_saved_map(probdis, tmp_path):
 
 def test_the_robot_experiment_offline_is_deterministic_and_takes_detector_overrides(
         probdis, tmp_path):
+    # with joint-state noise and latency too: the run index seeds the noise
     args = ('experiment', 'robot', '--offline', '--runs', '2', '--scenarios', 'demo_hook',
-            '--methods', 'probabilistic', '--detection', 'gap_ceiling=0.6', '--json')
+            '--methods', 'probabilistic', '--detection', 'gap_ceiling=0.6', '--fault',
+            'noise=0.001', '--fault', 'latency=0.02', '--json')
     runs = [json.loads(probdis(*args, '--out', str(tmp_path / name), timeout=300).stdout)
             for name in ('a', 'b')]
     for records in runs:
         assert [r['run'] for r in records] == [0, 1]
         assert all(r['offline'] and r['detection'] == {'gap_ceiling': 0.6} and
+                   r['faults'] == {'noise': 0.001, 'latency': 0.02} and
                    r['bag'] is None for r in records)
         assert max(r['peak_contact_force_n'] for r in records) > 0     # seed 1 touches
     keys = ('success', 'paths', 'failures', 'peak_contact_force_n', 'sim_time_s')
@@ -175,6 +178,15 @@ def test_the_robot_experiment_offline_is_deterministic_and_takes_detector_overri
     bad = probdis('experiment', 'robot', '--offline', '--detection', 'ceiling=1',
                   '--out', str(tmp_path / 'c'), check=False)
     assert bad.returncode == 2 and "'ceiling=1': not a detector threshold" in bad.stderr
+    for fault, said in (('lag=1', "'lag=1': not a fault of the mock"),
+                        ('latency=-1', 'latency must be non-negative'),
+                        ('grasp_stiffness=x', "'x' is not a number")):
+        bad = probdis('experiment', 'robot', '--offline', '--fault', fault,
+                      '--out', str(tmp_path / 'c'), check=False)
+        assert bad.returncode == 2 and said in bad.stderr, bad.stderr
+    bad = probdis('experiment', 'robot', '--engine', 'kinematic', '--fault', 'armature=0.1',
+                  '--out', str(tmp_path / 'c'), check=False)
+    assert bad.returncode == 2 and 'a fault of the physics arm' in bad.stderr
     bad = probdis('experiment', 'robot', '--offline', '--engine', 'kinematic',
                   '--scenarios', 'demo_iiwa', '--out', str(tmp_path / 'c'), check=False)
     assert bad.returncode == 2 and '--offline runs the physics scenes' in bad.stderr
