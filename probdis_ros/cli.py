@@ -1057,7 +1057,7 @@ def build_parser() -> argparse.ArgumentParser:
                        help="a fault of the mock in every run, by its node parameter's name: "
                        'noise [rad], latency [s], object_mass_error [kg], armature [kg m^2], '
                        'grasp_stiffness [Nm/rad] (repeatable; README "Parameters")')
-    robot.add_argument('--against', metavar='DIR', help="compare with the same runs in "
+    robot.add_argument('--against', metavar='DIR', help='compare with the same runs in '
                        "another experiment's DIR (another setting, fault or commit): paired "
                        'by scene, method and run, with a bootstrap interval')
     _jtc_start_argument(robot)
