@@ -129,6 +129,34 @@ def test_a_path_blocked_where_it_started_retreats_along_the_way_the_arm_came():
         assert len(loop.fmap) == 1 and loop.state is State.READY
 
 
+def test_after_a_blocked_retreat_the_next_retreat_skips_the_target_it_did_not_reach():
+    loop = straight_loop()
+    a, b = START - [0.3, 0, 0, 0, 0, 0, 0], START - [0.6, 0, 0, 0, 0, 0, 0]
+    loop.next_path(START)
+    loop.attempts[-1].path = np.array([START, a, b, GOAL])
+    blocked = b - [0.3, 0, 0, 0, 0, 0, 0]                     # on the last edge
+    retreat = loop.report_blocked(blocked, 2)
+    np.testing.assert_array_equal(retreat, [blocked, b])
+    loop.report_retreated(b)
+    loop.next_path(b)                      # planned from the target while the arm moves back
+    stuck = (blocked + b) / 2              # the retreat was blocked halfway
+    loop.withdraw()                        # the arm is not where that plan starts
+    assert loop.state is State.READY and loop.paths_tried == 1
+    loop.next_path(stuck)
+    retreat = loop.report_blocked(stuck, 0)                    # blocked at once
+    np.testing.assert_array_equal(retreat[-1], a)              # not back towards b again
+    assert not any(np.array_equal(q, b) for q in retreat)
+    # the start of the run is never dropped: a run blocked on its first edge, its retreat
+    # blocked too, still retreats to the start
+    loop = straight_loop()
+    loop.next_path(START)
+    loop.report_retreated(loop.report_blocked(a, 0)[-1])
+    loop.next_path(START)
+    loop.withdraw()
+    loop.next_path(a)
+    np.testing.assert_array_equal(loop.report_blocked(a, 0)[-1], START)
+
+
 def test_the_loop_stops_after_n_iter_paths():
     loop = straight_loop(max_paths=5)
     sim = CompliantArm(PLANAR, [BLOCKER])

@@ -260,10 +260,15 @@ class Disentangler:
         Take back the path just planned, which was not executed: plan again from elsewhere.
 
         The arm is not where that plan starts (its retreat was blocked), so the path would
-        begin with an edge the planner never costed; it does not count as a path tried.
+        begin with an edge the planner never costed; it does not count as a path tried.  Nor
+        is that start (the retreat's target) a via point reached: it leaves the route, so
+        that the next retreat goes back to the one before it, not along the line just
+        blocked (the start of the run stays).
         """
         self._expect(State.EXECUTING)
-        self.attempts.pop()
+        start = self.attempts.pop().path[0]
+        if len(self._route) > 1 and np.array_equal(self._route[-1], start):
+            self._route.pop()
         self.state = State.READY
 
     def learn(self, config: np.ndarray, joint_direction: np.ndarray) -> None:
