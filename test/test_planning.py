@@ -129,6 +129,30 @@ def test_compiled_edge_costs_match_the_reference():
         assert index == np.argmin(exact) and total == pytest.approx(exact.min(), rel=1e-9)
 
 
+def test_compiled_edge_costs_match_the_reference_on_edges_that_start_on_failures():
+    # every failure at an edge's first point, held as there: distance 0 and the same
+    # orientation (the arccos at the end of its range), each point's probability at its
+    # largest, and each chunk's bound passes every failure
+    for setting in ('3d', '3d-orient'):
+        arm = arm_for_setting(setting)
+        rng = np.random.default_rng(7)
+        sources = arm.random_configurations(rng, 12)
+        target = arm.random_configurations(rng, 1)[0]
+        fmap = FailureMap(arm.task_space, 100.0)
+        poses = arm.fk(sources)
+        for i in range(len(sources)):
+            q = None if poses.orientations is None else poses.orientations[i]
+            fmap.add(poses.positions[i], rng.normal(size=arm.task_space.dim), q)
+        assert fmap.probability(poses).min() == pytest.approx(1.0)
+        for toward in (True, False):
+            fast = EdgeCoster(arm, fmap).costs(sources, target, toward)
+            slow = ReferenceEdgeCoster(arm, fmap).costs(sources, target, toward)
+            np.testing.assert_allclose(fast, slow, rtol=1e-9)
+        index, total = EdgeCoster(arm, fmap).cheapest(sources, target)
+        exact = ReferenceEdgeCoster(arm, fmap).costs(sources, target)
+        assert index == np.argmin(exact) and total == pytest.approx(exact.min(), rel=1e-9)
+
+
 def test_compiled_costs_with_a_reach_match_the_reference_and_no_reach_is_the_paper():
     """Idea h's taper in the kernels is the map's, and an infinite reach changes no bit."""
     for setting in ('2d', '3d-orient'):

@@ -46,9 +46,17 @@ from probdis_ros.model.kinematics import (
 
 #: [m] a pose this near a failure point is at it (where an edge may start: _start_probability)
 AT_FAILURE = 1e-6
-#: Along an edge (not at its start), a point is at a failure only exactly on it (near2 0),
-#: where cos alpha is -1 (alpha = pi, ratio 1), as in the paper (_failure_into)
-ALONG_NEAR2 = 0.0
+#: [m] along an edge (not at its start), a point this near a failure point is on it, where
+#: cos alpha is -1 (alpha = pi, ratio 1), as in the paper at the failure itself
+#: (_failure_into); nearer than this the direction to the failure is rounding's, and an
+#: edge that ends on a failure's configuration got any ratio from 0 to 1
+AT_FAILURE_POINT = 1e-9
+ALONG_NEAR2 = AT_FAILURE_POINT ** 2
+#: cos(angle / 2) of a turn from a failure's orientation above which the turn is none: its
+#: arccos has an error of about 1e-8 rad from the rounding of the rotations alone (a
+#: pose on a failure's could weigh it by any factor within 1e-8 of 1, and -log(1 - p)
+#: turned that into an edge cost up to 1.5 apart); this is a turn of about 3e-7 rad
+AT_FAILURE_HALF_COS = 1.0 - 1e-14
 ALONG_AT_FAILURE = -1.0
 CHUNK = 16
 
@@ -321,6 +329,7 @@ def _failure_into(f, count, soa, f_points, f_dirs, f_rots, c_fail, use_orient, p
         trace = (g00 * r00[i] + g01 * r01[i] + g02 * r02[i] + g10 * r10[i] + g11 * r11[i]
                  + g12 * r12[i] + g20 * r20[i] + g21 * r21[i] + g22 * r22[i])
         half_cos = np.sqrt(min(1.0, max(0.0, (trace + 1.0) * 0.25)))
+        half_cos = 1.0 if half_cos > AT_FAILURE_HALF_COS else half_cos
         factor = 1.0 - arccos(half_cos) / np.pi
         p_out[i] = max(p_out[i], coord[i] * factor)
 

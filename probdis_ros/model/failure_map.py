@@ -201,13 +201,16 @@ class FailureMap:
         ``P(FAIL | c, F)`` for each pose of the batch, in [0, 1] (0 for an empty map).
 
         ``c_fail`` replaces the map's C_FAIL (the Hard baseline draws its regions with its
-        own); None uses the map's.  A pose within ``behind_within`` [m] of a failure counts
-        as behind it (alpha = 0) instead of the paper's alpha = pi at the failure itself
-        (where a Hard edge starts: :mod:`probdis_ros.model.kernels`).  A finite ``reach``
+        own); None uses the map's.  A pose within ``AT_FAILURE_POINT`` of a failure is at it
+        (the paper's alpha = pi: nearer, the direction to it is rounding's); within
+        ``behind_within`` [m] it counts as behind it (alpha = 0) instead (where a Hard edge
+        starts: :mod:`probdis_ros.model.kernels`).  A finite ``reach``
         [m] (beyond the paper; the informed method's idea h) tapers each failure's
         probability by ``(1 - d^2 / reach^2)^2`` to 0 at that distance: a block tells of the
         surface it met, not of all the space beyond it.  Infinite: the paper's kernel.
         """
+        from probdis_ros.model.edge_kernels import AT_FAILURE_HALF_COS, AT_FAILURE_POINT
+
         c_fail = self.c_fail if c_fail is None else float(c_fail)
         x = np.asarray(poses.positions, dtype=float)
         if len(self) == 0:
@@ -217,7 +220,8 @@ class FailureMap:
         dist = np.sqrt(dist2)
         cos_alpha = np.einsum('nfd,fd->nf', to_fail, self.directions)
         with np.errstate(invalid='ignore', divide='ignore'):
-            cos_alpha = np.where(dist2 > behind_within ** 2, cos_alpha / dist,
+            near = behind_within if behind_within > 0 else AT_FAILURE_POINT
+            cos_alpha = np.where(dist2 > near ** 2, cos_alpha / dist,
                                  1.0 if behind_within > 0 else -1.0)
         alpha = np.arccos(np.clip(cos_alpha, -1.0, 1.0))
         taper = np.maximum(0.0, 1.0 - dist2 / reach ** 2)
@@ -226,6 +230,7 @@ class FailureMap:
             if poses.orientations is None:
                 raise FailureMapError('this map models orientation: poses need quaternions')
             dots = np.abs(poses.orientations @ self.orientations.T)
+            dots = np.where(dots > AT_FAILURE_HALF_COS, 1.0, dots)
             d_orient = (2.0 / np.pi) * np.arccos(np.clip(dots, 0.0, 1.0))
             prob = prob * (1.0 - 0.5 * d_orient)
         return prob.max(axis=1)
