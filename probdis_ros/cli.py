@@ -578,6 +578,60 @@ def cmd_bench_physics(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_scene_check(args: argparse.Namespace) -> int:
+    """Check physical scenes: entangled at the start, and a way out exists (exit 1 if not)."""
+    import numpy as np
+    from probdis_ros.physics import load_scene
+    from probdis_ros.physics.family_scenes import family_scene_name
+    from probdis_ros.physics.oracle import CHECK_ITERATIONS, check_scene
+    from probdis_ros.physics.scene import shipped_scenes
+
+    iterations = CHECK_ITERATIONS if args.iterations is None else args.iterations
+    _positive(iterations, '--iterations')
+    _not_negative(args.clearance, '--clearance')
+    if args.family is None:
+        if args.worlds is not None or args.seed is not None:
+            raise UsageError('--worlds and --seed choose the worlds of --family')
+        names, drawn = args.scenes or shipped_scenes(), []
+    else:
+        worlds = 20 if args.worlds is None else args.worlds
+        seed = 0 if args.seed is None else args.seed
+        if worlds < 1 or seed < 0:
+            raise UsageError('--worlds must be positive and --seed not negative')
+        names = args.scenes
+        drawn = [family_scene_name(f, seed + w) for f in _families(args.family)
+                 for w in range(worlds)]
+    # a bad file is refused before any work; family worlds are drawn as their turn comes
+    scenes = [load_scene(name) for name in names] + [None] * len(drawn)
+    fit = 0
+    for name, scene in zip(names + drawn, scenes):
+        scene = scene or load_scene(name)
+        # each scene's own stream, so that a scene checks the same alone as in a list
+        check = check_scene(scene, np.random.default_rng(args.oracle_seed), iterations,
+                            args.clearance)
+        fit += check.ok
+        way = check.way_out
+        if args.json:
+            _print_json({'scene': name, 'ok': check.ok, 'problems': check.problems,
+                         'start_free': check.start_free, 'goal_free': check.goal_free,
+                         'blocked_after_m': check.blocked_after_m,
+                         'way_out': None if way is None else way.tolist(),
+                         'seconds': round(check.seconds, 3)})
+            sys.stdout.flush()         # a line per scene as it is checked: the progress
+            continue
+        if check.ok:
+            length = float(np.linalg.norm(np.diff(way, axis=0), axis=1).sum())
+            print(f'{name}: ok: the straight move is blocked {100 * check.blocked_after_m:.1f} '
+                  f'cm from the start; a way out of {len(way) - 1} straight moves '
+                  f'({length:.2f} rad of joint motion) found in {check.seconds:.1f} s',
+                  flush=True)
+        else:
+            print(f'{name}: NOT FIT: {"; ".join(check.problems)}', flush=True)
+    if not args.json:
+        print(f'{fit} of {len(scenes)} scenes entangled and solvable')
+    return 0 if fit == len(scenes) else 1
+
+
 def cmd_plan(args: argparse.Namespace) -> int:
     """Plan one path on a saved failure map and print it."""
     from probdis_ros.model import arm_for_setting, FailureMap
@@ -988,6 +1042,26 @@ def build_parser() -> argparse.ArgumentParser:
     plot.add_argument('--extent', type=float, nargs=4, metavar=('X0', 'X1', 'Y0', 'Y1'))
     plot.set_defaults(handler=cmd_map_plot)
 
+    scene = sub.add_parser('scene', help='physical scenes (config/scenes/, your files)')
+    scene_sub = scene.add_subparsers(dest='scene_command', required=True, metavar='ACTION')
+    check = scene_sub.add_parser(
+        'check', help='is a scene fit to measure a method: start and goal free, the '
+        'straight move blocked, a way out found by a planner that sees the scene (exit '
+        'status 1 if any is not)')
+    check.add_argument('scenes', nargs='*', metavar='SCENE', help='scene files or names '
+                       '(config/scenes/, or FAMILY-seedS; default: every shipped scene)')
+    check.add_argument('--family', help='comma-separated entanglement families (or all): '
+                       'their worlds of seeds SEED..SEED+WORLDS-1 as physical scenes too')
+    check.add_argument('--worlds', type=int, help='with --family: worlds per family (20)')
+    check.add_argument('--seed', type=int, help='with --family: the first world seed (0)')
+    check.add_argument('--iterations', type=int,
+                       help='RRT-Connect iterations per attempt, three attempts (10,000)')
+    check.add_argument('--clearance', type=float, default=0.0,
+                       help='[m] the way out keeps this far from the scene')
+    check.add_argument('--oracle-seed', type=int, default=0, help='seed of the planner')
+    check.add_argument('--json', action='store_true', help='one JSON object per scene')
+    check.set_defaults(handler=cmd_scene_check)
+
     experiment = sub.add_parser('experiment', help="the paper's evaluation: sweeps, report")
     exp_sub = experiment.add_subparsers(dest='experiment_command', required=True,
                                         metavar='ACTION')
@@ -1069,7 +1143,8 @@ def build_parser() -> argparse.ArgumentParser:
 def _command_name(args: argparse.Namespace) -> str:
     """Return the subcommand as typed (``experiment sweep``), to head its error lines."""
     words = [args.command] + [getattr(args, name) for name in
-                              ('experiment_command', 'map_command', 'bench')
+                              ('experiment_command', 'map_command', 'scene_command',
+                               'bench')
                               if getattr(args, name, None)]
     return ' '.join(words)
 

@@ -15,11 +15,13 @@
 """Physical scenes: the file format, bad files refused, and every shipped scene solvable."""
 
 import itertools
+import json
 
 import numpy as np
 from probdis_ros.model import iiwa_arm
 from probdis_ros.physics import load_scene, PhysicsIiwa, scene_from_dict, SceneError
 from probdis_ros.physics.oracle import (
+    check_scene,
     find_free_path,
     first_collision,
     path_is_free,
@@ -68,24 +70,54 @@ def test_the_shipped_scenes_are_listed():
 @pytest.mark.parametrize('name', SCENES)
 def test_scene_is_entangled_near_the_start_and_a_free_path_exists(name):
     scene = load_scene(name)
-    arm = PhysicsIiwa(scene)
     for q in (scene.start, scene.goal):
         assert np.all(q > ARM.lower + LIMIT_MARGIN) and np.all(q < ARM.upper - LIMIT_MARGIN)
-    assert not arm.in_collision(scene.start) and not arm.in_collision(scene.goal)
-    # the straight joint-space move is blocked, within 3-30 cm of the start
-    hit = first_collision(arm, np.array([scene.start, scene.goal]))
-    assert hit is not None
-    moved = np.linalg.norm(ARM.positions(hit)[0] - ARM.positions(scene.start)[0])
-    assert 0.01 < moved < 0.3
     # a way out exists, with 1 cm to spare (so that the lagging real arm can follow it too)
-    path = find_free_path(arm, scene.start, scene.goal, np.random.default_rng(0),
-                          clearance=0.01)
-    assert path is not None
+    check = check_scene(scene, np.random.default_rng(0), clearance=0.01)
+    assert check.ok, check.problems
+    assert check.start_free and check.goal_free
+    # the straight joint-space move is blocked, within 1-30 cm of the start
+    assert 0.01 < check.blocked_after_m < 0.3
+    path = check.way_out
     np.testing.assert_array_equal(path[0], scene.start)
     np.testing.assert_array_equal(path[-1], scene.goal)
+    arm = PhysicsIiwa(scene)
     assert path_is_free(arm, path, clearance=0.01)
     assert all(np.abs(np.diff(segment_configurations(a, b), axis=0)).max() <= 0.02 + 1e-12
                for a, b in itertools.pairwise(path))
+
+
+def test_scene_check_tells_a_fit_scene_from_unfit_ones(probdis, tmp_path):
+    """A user's files: a copy of Maze passes; without obstacles, or starting inside one, not."""
+    doc = yaml.safe_load(scene_path('robot_maze').read_text())
+    files = {}
+    for name, obstacles in (
+            ('maze', doc['obstacles']),
+            ('empty', []),
+            ('inside', doc['obstacles'] + [{
+                'type': 'sphere', 'radius': 0.1,
+                'position': ARM.positions(np.array(doc['start']))[0].tolist()}])):
+        files[name] = tmp_path / f'{name}.yaml'
+        files[name].write_text(yaml.safe_dump({**doc, 'name': name, 'obstacles': obstacles}))
+    result = probdis('scene', 'check', *map(str, files.values()), check=False)
+    assert result.returncode == 1, result.stderr
+    lines = dict(line.split(': ', 1) for line in result.stdout.splitlines()[:3])
+    assert lines[str(files['maze'])].startswith('ok: the straight move is blocked')
+    assert lines[str(files['empty'])] == \
+        'NOT FIT: the straight move to the goal is free: nothing to disentangle'
+    assert lines[str(files['inside'])].startswith('NOT FIT: the start collides')
+    assert result.stdout.splitlines()[-1] == '1 of 3 scenes entangled and solvable'
+    # --json: the way out itself, from the start to the goal
+    doc = json.loads(probdis('scene', 'check', str(files['maze']), '--json').stdout)
+    assert doc['ok'] and doc['problems'] == []
+    np.testing.assert_array_equal(doc['way_out'][0], load_scene(str(files['maze'])).start)
+    # a bad file or family is refused before any scene is checked
+    files['maze'].write_text('start: [0, 0]\n')
+    result = probdis('scene', 'check', 'robot_maze', str(files['maze']), check=False)
+    assert result.returncode == 2 and result.stdout == ''
+    assert 'probdis scene check: error:' in result.stderr and 'Traceback' not in result.stderr
+    result = probdis('scene', 'check', '--family', 'boxes', check=False)
+    assert result.returncode == 2 and 'unknown family' in result.stderr
 
 
 @pytest.mark.parametrize('name', SCENES)
