@@ -97,6 +97,11 @@ def values_by_name(names: Sequence[str], values: Sequence[float],
     return v if np.all(np.isfinite(v)) else None
 
 
+def _worst(excess: np.ndarray, allowed: float = 0.0) -> int | None:
+    """Return the joint of the largest excess if it is beyond what is allowed, else None."""
+    return int(excess.argmax()) if excess.max() > allowed else None
+
+
 @dataclass
 class StateCheck:
     """The gate every joint state passes: feed it each message in arrival order."""
@@ -158,9 +163,8 @@ class StateCheck:
         v = values_by_name(names, velocities, self.joint_names)
         if v is None:
             return None
-        excess = np.abs(v) - JUMP_SPEED * self.velocity_limits
-        if excess.max() > 0:
-            j = int(excess.argmax())
+        j = _worst(np.abs(v) - JUMP_SPEED * self.velocity_limits)
+        if j is not None:
             raise BadJointStateError(
                 f'A{j + 1} velocity {v[j]:.4g} rad/s is beyond {JUMP_SPEED:g} x its limit '
                 f'{self.velocity_limits[j]:.3f}: a glitch in the driver?')
@@ -213,9 +217,8 @@ class StateCheck:
     def _check(self, now: float, names: Sequence[str], positions: Sequence[float],
                stamp: float) -> np.ndarray:
         q = positions_by_name(names, positions, self.joint_names)
-        over = np.maximum(self.lower - q, q - self.upper)
-        if over.max() > self.tolerance:
-            j = int(over.argmax())
+        j = _worst(np.maximum(self.lower - q, q - self.upper), self.tolerance)
+        if j is not None:
             raise BadJointStateError(
                 f'A{j + 1} at {q[j]:.4g} rad is outside its limits [{self.lower[j]:.3f}, '
                 f'{self.upper[j]:.3f}]')
@@ -240,9 +243,8 @@ class StateCheck:
             dt = stamp - self.last_stamp if stamp > 0 and self.last_stamp > 0 else \
                 now - self.last_time
             step = np.abs(q - self.last_q)
-            excess = step - (JUMP_SPEED * self.velocity_limits * max(dt, 0.0) + JUMP_SLACK)
-            if excess.max() > 0:
-                j = int(excess.argmax())
+            j = _worst(step - (JUMP_SPEED * self.velocity_limits * max(dt, 0.0) + JUMP_SLACK))
+            if j is not None:
                 raise BadJointStateError(
                     f'A{j + 1} jumped {step[j]:.3f} rad in {dt:.3f} s, faster than the arm '
                     f'can: a second joint-state publisher or an old configuration?')
