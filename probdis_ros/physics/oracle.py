@@ -38,6 +38,11 @@ DEFAULT_RESOLUTION = 0.02   # rad, per joint, between checked configurations
 #: RRT-Connect iterations per attempt of :func:`check_scene`: a 5 mm ball threading the
 #: families' clutter needed more than the 3,000 that plan the shipped scenes (clutter-seed16)
 CHECK_ITERATIONS = 10_000
+#: [rad] per joint between the configurations :func:`check_scene` checks: the tip then moves
+#: at most about 1.6 cm between two (0.004 rad times the sum of the joints' reach to it),
+#: less than the 2 cm in which the families' 5 mm ball meets a 1 cm plate; at
+#: DEFAULT_RESOLUTION a way out could pass through a plate between two checks
+CHECK_RESOLUTION = 0.004
 
 
 def segment_configurations(a: np.ndarray, b: np.ndarray,
@@ -208,7 +213,7 @@ class SceneCheck:
 
 
 def check_scene(scene: Scene, rng: np.random.Generator, iterations: int = CHECK_ITERATIONS,
-                clearance: float = 0.0) -> SceneCheck:
+                clearance: float = 0.0, resolution: float = CHECK_RESOLUTION) -> SceneCheck:
     """
     Check a scene as the tests check the shipped ones (``probdis scene check``).
 
@@ -219,7 +224,7 @@ def check_scene(scene: Scene, rng: np.random.Generator, iterations: int = CHECK_
     arm = PhysicsIiwa(scene)
     start_free = not arm.in_collision(scene.start)
     goal_free = not arm.in_collision(scene.goal)
-    hit = first_collision(arm, np.array([scene.start, scene.goal]))
+    hit = first_collision(arm, np.array([scene.start, scene.goal]), resolution)
     blocked = None
     if hit is not None:
         tips = iiwa_arm().positions(np.array([scene.start, hit]))
@@ -227,6 +232,6 @@ def check_scene(scene: Scene, rng: np.random.Generator, iterations: int = CHECK_
     way = None
     if start_free and goal_free:
         way = find_free_path(arm, scene.start, scene.goal, rng, iterations,
-                             clearance=clearance)
+                             resolution=resolution, clearance=clearance)
     return SceneCheck(scene.name, start_free, goal_free, blocked, way,
                       time.perf_counter() - t0)
