@@ -50,6 +50,8 @@ def test_probdis_sim_engine_physics_prints_json_and_draws_the_scene(tmp_path):
     assert done.returncode == 0, done.stderr
     doc = json.loads(done.stdout)
     assert doc['success'] and doc['failures'] >= 1 and doc['peak_contact_force_n'] > 0
+    # the planner keeps the arm and the object clear of the mock's table top
+    assert doc['peak_table_force_n'] == 0.0 and doc['lowest_m'] > 0.05
     assert picture.stat().st_size > 10_000
     refused = subprocess.run([sys.executable, '-m', 'probdis_ros.cli', 'sim', '--engine',
                               'physics', '--scene', str(tmp_path / 'missing.yaml')],

@@ -32,6 +32,7 @@ import time
 import numpy as np
 from probdis_ros.model import iiwa_arm
 from probdis_ros.model.table import ROBOT_TABLE, Table
+from probdis_ros.physics.model import TABLE
 from probdis_ros.physics.settings import PhysicsSettings
 from probdis_ros.physics.simulated_robot import build_robot, RobotSettings
 from probdis_ros.planning import Disentangler, Method, RRTSettings, State
@@ -52,6 +53,7 @@ class PhysicsEpisode:
     configs: np.ndarray             # the arm's true configuration then
     gaps: np.ndarray                # the detector's L1 gap then (0 where nothing runs)
     contact_force: np.ndarray       # summed normal force between arm/object and scene [N]
+    table_force: np.ndarray         # the part of it on the mock's table top [N]
     plan_times_s: list[float]
     sim_time_s: float
     wall_time_s: float
@@ -65,13 +67,22 @@ class PhysicsEpisode:
     sent_speed_peak: float = 0.0
 
     def summary(self) -> dict:
-        """Return the JSON summary printed by ``probdis sim --engine physics --json``."""
+        """
+        Return the JSON summary printed by ``probdis sim --engine physics --json``.
+
+        ``lowest_m`` is as ``probdis sim`` reports it (the lowest height any collision shape
+        of the arm, or its tip, reached), of the arm's true configurations; with
+        ``peak_table_force_n`` it tells whether and how hard the arm or the object touched
+        the mock's table top, which the planner keeps them clear of.
+        """
         return {'success': self.success, 'outcome': self.outcome, 'paths': self.paths,
                 'failures': len(self.failures), 'message': self.message,
                 'sim_time_s': round(self.sim_time_s, 3),
                 'wall_time_s': round(self.wall_time_s, 3),
                 'real_time_factor': round(self.sim_time_s / max(self.wall_time_s, 1e-9), 1),
                 'peak_contact_force_n': round(float(self.contact_force.max(initial=0.0)), 1),
+                'peak_table_force_n': round(float(self.table_force.max(initial=0.0)), 1),
+                'lowest_m': round(float(iiwa_arm().lowest_heights(self.configs).min()), 4),
                 'command_speed_peak': round(self.command_speed_peak, 3),
                 'sent_speed_peak': round(self.sent_speed_peak, 3),
                 'plan_times_s': self.plan_times_s}
@@ -109,7 +120,7 @@ def run_physics_episode(scene: str, method: str | Method = 'probabilistic', seed
                                min_retreat=min_retreat)
     run = Run(arm, loop, run_settings or RunSettings())
     failures, commands = [], []
-    times, configs, gaps, forces = [], [], [], []
+    times, configs, gaps, forces, table_forces = [], [], [], [], []
 
     def act() -> None:
         while run.actions:
@@ -136,7 +147,9 @@ def run_physics_episode(scene: str, method: str | Method = 'probabilistic', seed
         times.append(robot.time)
         configs.append(robot.engine.q.copy())
         gaps.append(run.detector.gap if run.detector is not None else 0.0)
-        forces.append(sum(c.force for c in robot.engine.contacts()))
+        contacts = robot.engine.contacts()
+        forces.append(sum(c.force for c in contacts))
+        table_forces.append(sum(c.force for c in contacts if c.scene_geom == TABLE))
     if run.active:
         run.finish(State.STOPPED, f'time limit of {time_limit:.0f} s simulated reached')
     if robot.stopped is not None:
@@ -146,7 +159,8 @@ def run_physics_episode(scene: str, method: str | Method = 'probabilistic', seed
         success=run.phase.value == 'succeeded', outcome=run.phase.value,
         paths=loop.paths_tried, failures=failures, times=np.array(times),
         configs=np.array(configs).reshape(-1, arm.n_joints), gaps=np.array(gaps),
-        contact_force=np.array(forces), plan_times_s=loop.plan_times,
+        contact_force=np.array(forces), table_force=np.array(table_forces),
+        plan_times_s=loop.plan_times,
         sim_time_s=robot.time, wall_time_s=time.perf_counter() - wall, scene=scene_doc,
         loop=loop, message=run.message, commands=commands,
         command_speed_peak=robot.command_speed_peak, sent_speed_peak=robot.sent_speed_peak)

@@ -126,6 +126,8 @@ def offline_run(scenario: str, method: Method, run: int, velocity_scaling: float
     return {'success': summary['success'], 'paths': summary['paths'],
             'failures': summary['failures'], 'bag': None, 'message': summary['message'],
             'peak_contact_force_n': summary['peak_contact_force_n'],
+            'peak_table_force_n': summary['peak_table_force_n'],
+            'lowest_m': summary['lowest_m'],
             'command_speed_peak': summary['command_speed_peak'],
             'sent_speed_peak': summary['sent_speed_peak'],
             'sim_time_s': summary['sim_time_s']}
@@ -218,8 +220,8 @@ def run_robot_experiment(out: Path, scenarios: list[str], methods: list[Method],
                       'failures': result['failures'], 'wall_s': time.monotonic() - t0,
                       'bag': result['bag'], 'offline': offline, 'detection': detection,
                       'jtc_start': jtc_start, 'faults': faults}
-            for name in ('peak_contact_force_n', 'sim_time_s', 'message', 'command_speed_peak',
-                         'sent_speed_peak'):
+            for name in ('peak_contact_force_n', 'peak_table_force_n', 'lowest_m',
+                         'sim_time_s', 'message', 'command_speed_peak', 'sent_speed_peak'):
                 if name in result:
                     record[name] = result[name]
             if result['bag'] and sim_time:
