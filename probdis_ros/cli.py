@@ -279,16 +279,35 @@ def _families(text: str) -> list[str]:
     return families
 
 
+def _family_groups(args: argparse.Namespace, default_worlds: int
+                   ) -> dict[str, list[str]] | None:
+    """Return the scene names of --family's worlds by family (--worlds, --seed), or None."""
+    from probdis_ros.physics.family_scenes import family_scene_name
+
+    if args.family is None:
+        if args.worlds is not None or args.seed is not None:
+            raise UsageError('--worlds and --seed choose the worlds of --family')
+        return None
+    families = _families(args.family)
+    worlds = default_worlds if args.worlds is None else args.worlds
+    seed = 0 if args.seed is None else args.seed
+    if worlds < 1 or seed < 0:
+        raise UsageError('--worlds must be positive and --seed not negative')
+    return {f: [family_scene_name(f, seed + w) for w in range(worlds)] for f in families}
+
+
 def _robot_worlds(args: argparse.Namespace) -> tuple[list[str], dict[str, list[str]] | None]:
     """Return the robot experiment's scenes (or scenarios) and, for families, their groups."""
-    from probdis_ros.physics.family_scenes import family_scene_name
     from probdis_ros.physics.scene import scene_path
     from probdis_ros.resources import scenario_path
 
     physics = args.engine == 'physics'
-    if args.family is None:
-        if args.worlds is not None or args.seed is not None:
-            raise UsageError('--worlds and --seed choose the worlds of --family')
+    if args.family is not None and args.scenarios is not None:
+        raise UsageError('give --scenarios or --family, not both')
+    if args.family is not None and not physics:
+        raise UsageError('--family runs the families as physical scenes (--engine physics)')
+    groups = _family_groups(args, 5)
+    if groups is None:
         scenarios = _split(args.scenarios or 'robot_waste,robot_maze,robot_bunny')
         missing = [s for s in scenarios
                    if not (scene_path(s) if physics else scenario_path(s)).is_file()]
@@ -297,18 +316,9 @@ def _robot_worlds(args: argparse.Namespace) -> tuple[list[str], dict[str, list[s
             raise UsageError(f'no {kind} file {missing[0]!r} (a path, or a name in '
                              f'config/{kind}s/)')
         return scenarios, None
-    if args.scenarios is not None:
-        raise UsageError('give --scenarios or --family, not both')
-    if not physics:
-        raise UsageError('--family runs the families as physical scenes (--engine physics)')
-    families = _families(args.family)
-    worlds = 5 if args.worlds is None else args.worlds
-    seed = 0 if args.seed is None else args.seed
-    if worlds < 1 or seed < 0:
-        raise UsageError('--worlds must be positive and --seed not negative')
-    groups = {f: [family_scene_name(f, seed + w) for w in range(worlds)] for f in families}
     # world by world across the families, so that a partial run has as many of each
-    return [groups[f][w] for w in range(worlds) for f in families], groups
+    worlds = len(next(iter(groups.values())))
+    return [groups[f][w] for w in range(worlds) for f in groups], groups
 
 
 def cmd_experiment_robot(args: argparse.Namespace) -> int:
@@ -582,25 +592,15 @@ def cmd_scene_check(args: argparse.Namespace) -> int:
     """Check physical scenes: entangled at the start, and a way out exists (exit 1 if not)."""
     import numpy as np
     from probdis_ros.physics import load_scene
-    from probdis_ros.physics.family_scenes import family_scene_name
     from probdis_ros.physics.oracle import CHECK_ITERATIONS, check_scene
     from probdis_ros.physics.scene import shipped_scenes
 
     iterations = CHECK_ITERATIONS if args.iterations is None else args.iterations
     _positive(iterations, '--iterations')
     _not_negative(args.clearance, '--clearance')
-    if args.family is None:
-        if args.worlds is not None or args.seed is not None:
-            raise UsageError('--worlds and --seed choose the worlds of --family')
-        names, drawn = args.scenes or shipped_scenes(), []
-    else:
-        worlds = 20 if args.worlds is None else args.worlds
-        seed = 0 if args.seed is None else args.seed
-        if worlds < 1 or seed < 0:
-            raise UsageError('--worlds must be positive and --seed not negative')
-        names = args.scenes
-        drawn = [family_scene_name(f, seed + w) for f in _families(args.family)
-                 for w in range(worlds)]
+    groups = _family_groups(args, 20)
+    names = args.scenes if groups is not None else args.scenes or shipped_scenes()
+    drawn = [] if groups is None else [name for group in groups.values() for name in group]
     # a bad file is refused before any work; family worlds are drawn as their turn comes
     scenes = [load_scene(name) for name in names] + [None] * len(drawn)
     fit = 0
