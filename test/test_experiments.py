@@ -33,6 +33,8 @@ from probdis_ros.experiments.report import (
     family_table,
     markdown_table,
     paired_markdown,
+    success_ci,
+    success_curve,
     summarise,
     write_report,
 )
@@ -237,6 +239,20 @@ def test_the_bootstrap_interval_matches_the_exact_bootstrap_distribution():
     assert bootstrap_ci(values, samples=20000) == pytest.approx(exact)
     assert bootstrap_ci(np.ones(7)) == (1.0, 1.0)
     assert bootstrap_ci(values) == bootstrap_ci(values)          # seeded
+
+
+def test_a_success_rate_of_all_or_none_gets_the_exact_interval_not_a_point():
+    # 100 of 100: the bootstrap's resamples are all 1; Clopper-Pearson's lower bound solves
+    # p^100 = 0.025 (the binomial's chance of 100 of 100 at that p)
+    low, high = success_ci(np.ones(100))
+    assert high == 1.0 and low == pytest.approx(0.96378, abs=1e-5)
+    assert low ** 100 == pytest.approx(0.025)
+    assert success_ci(np.zeros(100)) == pytest.approx((0.0, 1.0 - low))
+    # anything between: the bootstrap's, unchanged
+    values = np.array([1.0] * 60 + [0.0] * 40)
+    assert success_ci(values) == bootstrap_ci(values)
+    curve = success_curve([{'success': True, 'paths': 1}] * 20, max_paths=3)
+    assert curve['rate'] == [1.0] * 3 and curve['low'][0] == pytest.approx(0.025 ** (1 / 20))
 
 
 def test_the_summary_does_not_depend_on_the_order_the_workers_finished_in():

@@ -18,9 +18,10 @@
 For every (setting, obstacle count, method): the success rate within n planned paths for
 n = 1..max (an episode succeeded within n if it succeeded after at most n paths), with a 95 %
 percentile-bootstrap interval over the worlds (taken in world order, not the order the
-workers finished in); the mean number of paths of the successful episodes; the planning time
-per path; the share of the paths that were empty plans (no feasible path found, the arm did
-not move; records older than that count are shown as unknown).  Written as ``success.png``
+workers finished in; where all or none succeeded, the exact interval: :func:`success_ci`);
+the mean number of paths of the successful episodes; the planning time per path; the share
+of the paths that were empty plans (no feasible path found, the arm did not move; records
+older than that count are shown as unknown).  Written as ``success.png``
 (like the paper's Fig. 4), ``sensitivity.png`` (success at the maximum, like its Fig. 5),
 ``summary.json`` and ``summary.md``.  Every method is also set against the paper's
 (probabilistic) on the worlds both ran: the difference of success with a paired bootstrap
@@ -66,13 +67,30 @@ def bootstrap_ci(values: np.ndarray, samples: int = BOOTSTRAP_SAMPLES,
     return float(low), float(high)
 
 
+def success_ci(successes: np.ndarray, level: float = 0.95) -> tuple[float, float]:
+    """
+    Return the interval of a success rate over worlds (successes: 1 or 0 per world).
+
+    The percentile bootstrap, but where every world succeeded (or none did): there every
+    resample is alike and the bootstrap's interval has no width, as if n worlds proved a
+    rate of exactly 1; the exact (Clopper-Pearson) interval of n of n is
+    ``[((1 - level) / 2) ** (1 / n), 1]`` (0.964-1 for 100 worlds), and of 0 of n its mirror.
+    """
+    successes = np.asarray(successes, dtype=float)
+    n = len(successes)
+    if n == 0 or 0.0 < successes.mean() < 1.0:
+        return bootstrap_ci(successes, level=level)
+    bound = ((1 - level) / 2) ** (1 / n)
+    return (bound, 1.0) if successes.mean() == 1.0 else (0.0, 1.0 - bound)
+
+
 def success_curve(records: list[dict], max_paths: int) -> dict:
     """Return success within n paths (n = 1..max_paths): rate, CI low, CI high per n."""
     paths = np.array([r['paths'] if r['success'] else max_paths + 1 for r in records])
     rate, low, high = [], [], []
     for n in range(1, max_paths + 1):
         within = (paths <= n).astype(float)
-        ci = bootstrap_ci(within)
+        ci = success_ci(within)
         rate.append(float(within.mean()))
         low.append(ci[0])
         high.append(ci[1])
