@@ -219,7 +219,7 @@ def cmd_experiment_report(args: argparse.Namespace) -> int:
 
     for name in ('summary.json', 'summary.md'):
         _check_output(Path(args.dir) / name)
-    summary = write_report(args.dir)
+    summary = write_report(args.dir, args.others or ())
     print(markdown_tables(summary), end='')
     print(f'wrote {", ".join(summary["files"])} in {args.dir}')
     return 0
@@ -1093,6 +1093,10 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.set_defaults(handler=cmd_experiment_sweep)
     report = exp_sub.add_parser('report', help='success curves, CIs, figures and tables')
     report.add_argument('dir', help='the --out directory of a sweep')
+    report.add_argument('--with', dest='others', action='append', metavar='DIR',
+                        help="another sweep's directory: its methods on the same worlds, "
+                        "compared world by world with the paper's (repeatable; the report "
+                        'is written into the first directory)')
     report.set_defaults(handler=cmd_experiment_report)
     robot = exp_sub.add_parser('robot', help='the robot scenarios through the ROS nodes '
                                "against the mock iiwa, like the paper's Table I")

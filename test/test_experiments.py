@@ -441,6 +441,32 @@ def run_report(directory):
                           capture_output=True, text=True, timeout=120)
 
 
+def test_a_sweep_in_another_directory_is_compared_world_by_world(tmp_path):
+    """The paper's method in one sweep, another method later in its own: paired by world."""
+    paper, later = tmp_path / 'paper', tmp_path / 'later'
+    for folder, method, solved in ((paper, 'probabilistic', {0, 1}), (later, 'informed', {1, 2})):
+        folder.mkdir()
+        (folder / EPISODES_FILE).write_text(''.join(
+            json.dumps({**report_record(w, method), 'success': w in solved}) + '\n'
+            for w in range(4)))
+    result = subprocess.run([*probdis_command(), 'experiment', 'report', str(paper), '--with',
+                             str(later)], capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    summary = json.loads((paper / 'summary.json').read_text())
+    assert summary['sources'] == [str(paper), str(later)] and summary['episodes'] == 8
+    (row,) = summary['paired']
+    # worlds 0-3: informed - paper = -1, 0, +1, 0
+    assert (row['method'], row['worlds'], row['difference'], row['both_solved']) == \
+        ('informed', 4, 0.0, 1)
+    assert not (later / 'summary.json').exists()
+    # the same episode in both is refused, naming both directories
+    with (later / EPISODES_FILE).open('a') as stream:
+        stream.write(json.dumps(report_record(3)) + '\n')
+    with pytest.raises(ValueError, match=f'probabilistic on world 3 of 2d is in both {paper} '
+                       f'and {later}'):
+        write_report(paper, [later])
+
+
 def test_the_report_names_a_record_that_is_no_episode_and_an_unwritable_summary(tmp_path):
     episodes = tmp_path / EPISODES_FILE
     episodes.write_text(json.dumps(report_record(0)) + '\n{"a": 1}\n')

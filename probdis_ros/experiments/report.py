@@ -34,6 +34,7 @@ directory holds settings.
 from __future__ import annotations
 
 from collections import defaultdict
+from collections.abc import Sequence
 import json
 from pathlib import Path
 import statistics
@@ -422,20 +423,48 @@ def check_records(records: list, source: str | Path) -> list[dict]:
     return records
 
 
-def write_report(directory: str | Path) -> dict:
-    """
-    Read DIR/episodes.jsonl; write the figures, summary.json and summary.md into DIR.
+def episode_key(record: dict) -> tuple:
+    """Return what makes an episode one: its cell, method and world."""
+    return (record.get('family', ''), record['setting'], record['obstacles'],
+            record['method'], world_order(record))
 
-    The summary's ``files`` names what was written.
+
+def read_sweeps(directory: str | Path, others: Sequence[str | Path] = ()) -> list[dict]:
+    """
+    Return the episodes of DIR and of other sweep directories, refusing one run twice.
+
+    Other directories bring other methods on the same worlds (a sweep run later, into its
+    own directory), so that the report pairs them by world with DIR's; an episode (cell,
+    method, world) in two of them is refused, naming both.
+    """
+    records, seen = [], {}
+    for source in [Path(directory), *map(Path, others)]:
+        found = check_records(read_episodes(source / EPISODES_FILE), source / EPISODES_FILE)
+        if not found:
+            raise ValueError(f'{source / EPISODES_FILE}: no episodes (run probdis experiment '
+                             'sweep first)')
+        for record in found:
+            key = episode_key(record)
+            if seen.setdefault(key, source) != source:
+                raise ValueError(f'{record["method"]} on world {key[-1][0]} of '
+                                 f'{key[0] or key[1]} is in both {seen[key]} and {source}: '
+                                 '--with takes directories of other methods')
+        records += found
+    return records
+
+
+def write_report(directory: str | Path, others: Sequence[str | Path] = ()) -> dict:
+    """
+    Read DIR/episodes.jsonl (and other sweeps'); write the figures and summaries into DIR.
+
+    The summary's ``files`` names what was written, ``sources`` the directories read.
     """
     from probdis_ros.plots import plot_sensitivity, plot_success_curves
 
     directory = Path(directory)
-    records = check_records(read_episodes(directory / EPISODES_FILE), directory / EPISODES_FILE)
-    if not records:
-        raise ValueError(f'{directory / EPISODES_FILE}: no episodes (run probdis experiment '
-                         'sweep first)')
+    records = read_sweeps(directory, others)
     summary = summarise(records)
+    summary['sources'] = [str(directory), *map(str, others)]
     summary['claims'] = claims(summary)
     files = []
     settings = _settings(summary)
