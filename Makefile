@@ -43,7 +43,15 @@ demo: venv
 lint: venv
 	$(PY) -m ruff check probdis_ros test setup.py config/launch
 
-test: lint
+# The tests also run the benchmark extra (ompl: `probdis bench quality` beside BIT*), which
+# the package itself never imports.
+BENCH_STAMP := $(VENV)/.probdis-bench-installed
+
+$(BENCH_STAMP): .ci/requirements/bench.txt $(STAMP)
+	$(PY) -m pip install --quiet --disable-pip-version-check -r .ci/requirements/bench.txt
+	@touch $(BENCH_STAMP)
+
+test: lint $(BENCH_STAMP)
 	$(PY) -m pytest test
 
 bench: venv
