@@ -52,6 +52,10 @@ def test_probdis_sim_engine_physics_prints_json_and_draws_the_scene(tmp_path):
     assert doc['success'] and doc['failures'] >= 1 and doc['peak_contact_force_n'] > 0
     # the planner keeps the arm and the object clear of the mock's table top
     assert doc['peak_table_force_n'] == 0.0 and doc['lowest_m'] > 0.05
+    # what a real arm's collision detection would compare: the hook's push, on every joint
+    # before the wrist's last (a push at the flange point turns A7 little)
+    torque = doc['peak_external_torque_nm']
+    assert len(torque) == 7 and min(torque[:6]) > 0.5 and max(torque) < 320
     assert picture.stat().st_size > 10_000
     refused = subprocess.run([sys.executable, '-m', 'probdis_ros.cli', 'sim', '--engine',
                               'physics', '--scene', str(tmp_path / 'missing.yaml')],

@@ -54,6 +54,7 @@ class PhysicsEpisode:
     gaps: np.ndarray                # the detector's L1 gap then (0 where nothing runs)
     contact_force: np.ndarray       # summed normal force between arm/object and scene [N]
     table_force: np.ndarray         # the part of it on the mock's table top [N]
+    external_torque_peak: np.ndarray  # per joint, the largest |external torque| [Nm]
     plan_times_s: list[float]
     sim_time_s: float
     wall_time_s: float
@@ -74,6 +75,9 @@ class PhysicsEpisode:
         of the arm, or its tip, reached), of the arm's true configurations; with
         ``peak_table_force_n`` it tells whether and how hard the arm or the object touched
         the mock's table top, which the planner keeps them clear of.
+        ``peak_external_torque_nm``: per joint, the largest external torque the contacts
+        exerted, what a real iiwa's collision detection (if its application sets one)
+        compares with its thresholds.
         """
         return {'success': self.success, 'outcome': self.outcome, 'paths': self.paths,
                 'failures': len(self.failures), 'message': self.message,
@@ -83,6 +87,8 @@ class PhysicsEpisode:
                 'peak_contact_force_n': round(float(self.contact_force.max(initial=0.0)), 1),
                 'peak_table_force_n': round(float(self.table_force.max(initial=0.0)), 1),
                 'lowest_m': round(float(iiwa_arm().lowest_heights(self.configs).min()), 4),
+                'peak_external_torque_nm': [round(float(t), 1)
+                                            for t in self.external_torque_peak],
                 'command_speed_peak': round(self.command_speed_peak, 3),
                 'sent_speed_peak': round(self.sent_speed_peak, 3),
                 'plan_times_s': self.plan_times_s}
@@ -121,6 +127,7 @@ def run_physics_episode(scene: str, method: str | Method = 'probabilistic', seed
     run = Run(arm, loop, run_settings or RunSettings())
     failures, commands = [], []
     times, configs, gaps, forces, table_forces = [], [], [], [], []
+    torque_peak = np.zeros(arm.n_joints)
 
     def act() -> None:
         while run.actions:
@@ -150,6 +157,8 @@ def run_physics_episode(scene: str, method: str | Method = 'probabilistic', seed
         contacts = robot.engine.contacts()
         forces.append(sum(c.force for c in contacts))
         table_forces.append(sum(c.force for c in contacts if c.scene_geom == TABLE))
+        if contacts:
+            np.maximum(torque_peak, np.abs(robot.engine.tau_external), out=torque_peak)
     if run.active:
         run.finish(State.STOPPED, f'time limit of {time_limit:.0f} s simulated reached')
     if robot.stopped is not None:
@@ -160,6 +169,7 @@ def run_physics_episode(scene: str, method: str | Method = 'probabilistic', seed
         paths=loop.paths_tried, failures=failures, times=np.array(times),
         configs=np.array(configs).reshape(-1, arm.n_joints), gaps=np.array(gaps),
         contact_force=np.array(forces), table_force=np.array(table_forces),
+        external_torque_peak=torque_peak,
         plan_times_s=loop.plan_times,
         sim_time_s=robot.time, wall_time_s=time.perf_counter() - wall, scene=scene_doc,
         loop=loop, message=run.message, commands=commands,

@@ -128,6 +128,7 @@ def offline_run(scenario: str, method: Method, run: int, velocity_scaling: float
             'peak_contact_force_n': summary['peak_contact_force_n'],
             'peak_table_force_n': summary['peak_table_force_n'],
             'lowest_m': summary['lowest_m'],
+            'peak_external_torque_nm': summary['peak_external_torque_nm'],
             'command_speed_peak': summary['command_speed_peak'],
             'sent_speed_peak': summary['sent_speed_peak'],
             'sim_time_s': summary['sim_time_s']}
@@ -221,7 +222,8 @@ def run_robot_experiment(out: Path, scenarios: list[str], methods: list[Method],
                       'bag': result['bag'], 'offline': offline, 'detection': detection,
                       'jtc_start': jtc_start, 'faults': faults}
             for name in ('peak_contact_force_n', 'peak_table_force_n', 'lowest_m',
-                         'sim_time_s', 'message', 'command_speed_peak', 'sent_speed_peak'):
+                         'peak_external_torque_nm', 'sim_time_s', 'message',
+                         'command_speed_peak', 'sent_speed_peak'):
                 if name in result:
                     record[name] = result[name]
             if result['bag'] and sim_time:
