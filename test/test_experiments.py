@@ -32,6 +32,7 @@ from probdis_ros.experiments.report import (
     claims_markdown,
     family_table,
     markdown_table,
+    paired_ci,
     paired_markdown,
     success_ci,
     success_curve,
@@ -251,6 +252,10 @@ def test_a_success_rate_of_all_or_none_gets_the_exact_interval_not_a_point():
     # anything between: the bootstrap's, unchanged
     values = np.array([1.0] * 60 + [0.0] * 40)
     assert success_ci(values) == bootstrap_ci(values)
+    # a paired difference where no pair differs: at most the share of pairs that differ
+    assert paired_ci(np.zeros(100)) == pytest.approx((low - 1.0, 1.0 - low))
+    diffs = np.array([1.0] * 3 + [0.0] * 97)
+    assert paired_ci(diffs) == bootstrap_ci(diffs)
     curve = success_curve([{'success': True, 'paths': 1}] * 20, max_paths=3)
     assert curve['rate'] == [1.0] * 3 and curve['low'][0] == pytest.approx(0.025 ** (1 / 20))
 
@@ -381,7 +386,9 @@ def test_the_comparison_with_the_paper_is_paired_by_world():
     paths and worlds 10-19 too, in 15: its mean over its own successes (9) is above the
     paper's (5), over the worlds both solved below (3 against 5); it succeeds in 10 more
     worlds of 20.  ``hard:0.01`` solves exactly the paper's worlds: a difference of 0 in
-    every world, so the paired interval is 0-0 (unpaired, both rates' intervals are wide).
+    every world: no world differs, so the paired interval is the exact bound on the share of
+    worlds that differ, +-(1 - 0.025^(1/20)) = +-0.17 (unpaired, both rates' intervals are
+    wider).
     """
     def record(method, world, success, paths):
         return {'setting': '2d', 'obstacles': 10, 'method': method, 'max_paths': 20,
@@ -405,7 +412,9 @@ def test_the_comparison_with_the_paper_is_paired_by_world():
     # the worlds resampled: the interval of the mean of ten 1s and ten 0s
     assert eps['difference_ci95'] == list(bootstrap_ci(np.array([0.0] * 10 + [1.0] * 10)))
     assert 0.25 < eps['difference_ci95'][0] < 0.5 < eps['difference_ci95'][1] < 0.75
-    assert (hard['difference'], hard['difference_ci95']) == (0.0, [0.0, 0.0])
+    bound = 1 - 0.025 ** (1 / 20)
+    assert hard['difference'] == 0.0 and hard['difference_ci95'] == pytest.approx([-bound, bound])
+    assert 0.16 < bound < 0.17
     assert cells['hard:0.01']['ci95'][0] < 0.4 and cells['hard:0.01']['ci95'][1] > 0.6
     # the claims' row for the best baseline carries its paired comparison
     verdicts = claims(summary)
@@ -417,7 +426,7 @@ def test_the_comparison_with_the_paper_is_paired_by_world():
     table = paired_markdown(summary, families=False)
     assert f'| 2d | 10 | epsilon:0.2 | 20 | 1.00 / 0.50 | +0.50 ({low:+.2f} to {high:+.2f}) ' \
         '| 10 | 3.0 / 5.0 |' in table
-    assert '| 2d | 10 | hard:0.01 | 20 | 0.50 / 0.50 | +0.00 (+0.00 to +0.00) | 10 | 7.0 / 5.0 |' \
+    assert '| 2d | 10 | hard:0.01 | 20 | 0.50 / 0.50 | +0.00 (-0.17 to +0.17) | 10 | 7.0 / 5.0 |' \
         in table
     assert paired_markdown(summary, families=True) == ''
     # families pair the same way, in their own table

@@ -85,6 +85,21 @@ def success_ci(successes: np.ndarray, level: float = 0.95) -> tuple[float, float
     return (bound, 1.0) if successes.mean() == 1.0 else (0.0, 1.0 - bound)
 
 
+def paired_ci(differences: np.ndarray, level: float = 0.95) -> tuple[float, float]:
+    """
+    Return the interval of a mean paired difference of success (1, 0 or -1 per pair).
+
+    The percentile bootstrap, but where every pair ended the same (all differences 0): there
+    it has no width; the difference is at most the share of pairs that differ, whose exact
+    upper bound with none in n is ``1 - ((1 - level) / 2) ** (1 / n)`` (0.036 for 100).
+    """
+    differences = np.asarray(differences, dtype=float)
+    if len(differences) == 0 or np.any(differences != 0.0):
+        return bootstrap_ci(differences, level=level)
+    bound = 1.0 - ((1 - level) / 2) ** (1 / len(differences))
+    return -bound, bound
+
+
 def success_curve(records: list[dict], max_paths: int) -> dict:
     """Return success within n paths (n = 1..max_paths): rate, CI low, CI high per n."""
     paths = np.array([r['paths'] if r['success'] else max_paths + 1 for r in records])
@@ -156,7 +171,7 @@ def paired(ours: list[dict], theirs: list[dict]) -> dict | None:
     Compare a method's episodes (theirs) with the paper's (ours) on the worlds both ran.
 
     Per world, the difference of success (1, 0 or -1); its mean with a paired 95 %
-    percentile-bootstrap interval (the worlds resampled, as :func:`bootstrap_ci`); and the
+    percentile-bootstrap interval (the worlds resampled, as :func:`paired_ci`); and the
     mean paths of each over the worlds both solved (each method's own successes are
     different worlds).  None if no world is in both (records without a world index pair
     with nothing).
@@ -168,7 +183,7 @@ def paired(ours: list[dict], theirs: list[dict]) -> dict | None:
         return None
     diffs = np.array([float(other[w]['success']) - float(mine[w]['success']) for w in common])
     both = [w for w in common if mine[w]['success'] and other[w]['success']]
-    ci = bootstrap_ci(diffs)
+    ci = paired_ci(diffs)
     return {'worlds': len(common),
             'success': statistics.fmean(float(other[w]['success']) for w in common),
             'success_paper': statistics.fmean(float(mine[w]['success']) for w in common),

@@ -297,10 +297,10 @@ def paired_table(records: list[dict], baseline: list[dict], methods: list[str]) 
 
     Runs pair by (scenario, method, run), valid ones only; per method: the runs both hold,
     the share disentangled in each, the mean difference with a paired 95 % percentile-
-    bootstrap interval (the pairs resampled, as the sweeps' reports do), the runs won and
-    lost, and the mean paths over the runs both got out of.
+    bootstrap interval (the pairs resampled, as the sweeps' reports do: ``paired_ci``), the
+    runs won and lost, and the mean paths over the runs both got out of.
     """
-    from probdis_ros.experiments.report import bootstrap_ci
+    from probdis_ros.experiments.report import paired_ci
 
     def key(record: dict) -> tuple:
         return record['scenario'], record['method'], record.get('run')
@@ -317,7 +317,7 @@ def paired_table(records: list[dict], baseline: list[dict], methods: list[str]) 
             lines.append(f'| {method} | 0 | - | - | - | - |')
             continue
         diffs = np.array([float(a['success']) - float(b['success']) for _, a, b in pairs])
-        low, high = bootstrap_ci(diffs)
+        low, high = paired_ci(diffs)
         both = [(a['paths'], b['paths']) for _, a, b in pairs if a['success'] and b['success']]
         paths = (f'{statistics.fmean(a for a, _ in both):.1f} / '
                  f'{statistics.fmean(b for _, b in both):.1f}') if both else '-'
