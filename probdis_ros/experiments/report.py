@@ -68,6 +68,11 @@ def bootstrap_ci(values: np.ndarray, samples: int = BOOTSTRAP_SAMPLES,
     return float(low), float(high)
 
 
+def none_of_bound(n: int, level: float = 0.95) -> float:
+    """Return the exact upper bound of a share of which none of n was seen (Clopper-Pearson)."""
+    return 1.0 - ((1 - level) / 2) ** (1 / n)
+
+
 def success_ci(successes: np.ndarray, level: float = 0.95) -> tuple[float, float]:
     """
     Return the interval of a success rate over worlds (successes: 1 or 0 per world).
@@ -75,14 +80,14 @@ def success_ci(successes: np.ndarray, level: float = 0.95) -> tuple[float, float
     The percentile bootstrap, but where every world succeeded (or none did): there every
     resample is alike and the bootstrap's interval has no width, as if n worlds proved a
     rate of exactly 1; the exact (Clopper-Pearson) interval of n of n is
-    ``[((1 - level) / 2) ** (1 / n), 1]`` (0.964-1 for 100 worlds), and of 0 of n its mirror.
+    ``[1 - none_of_bound(n), 1]`` (0.964-1 for 100 worlds), and of 0 of n its mirror.
     """
     successes = np.asarray(successes, dtype=float)
     n = len(successes)
     if n == 0 or 0.0 < successes.mean() < 1.0:
         return bootstrap_ci(successes, level=level)
-    bound = ((1 - level) / 2) ** (1 / n)
-    return (bound, 1.0) if successes.mean() == 1.0 else (0.0, 1.0 - bound)
+    bound = none_of_bound(n, level)
+    return (1.0 - bound, 1.0) if successes.mean() == 1.0 else (0.0, bound)
 
 
 def paired_ci(differences: np.ndarray, level: float = 0.95) -> tuple[float, float]:
@@ -90,13 +95,13 @@ def paired_ci(differences: np.ndarray, level: float = 0.95) -> tuple[float, floa
     Return the interval of a mean paired difference of success (1, 0 or -1 per pair).
 
     The percentile bootstrap, but where every pair ended the same (all differences 0): there
-    it has no width; the difference is at most the share of pairs that differ, whose exact
-    upper bound with none in n is ``1 - ((1 - level) / 2) ** (1 / n)`` (0.036 for 100).
+    it has no width; the difference is at most the share of pairs that differ, none of n
+    seen: ``none_of_bound(n)`` either way (0.036 for 100).
     """
     differences = np.asarray(differences, dtype=float)
     if len(differences) == 0 or np.any(differences != 0.0):
         return bootstrap_ci(differences, level=level)
-    bound = 1.0 - ((1 - level) / 2) ** (1 / len(differences))
+    bound = none_of_bound(len(differences), level)
     return -bound, bound
 
 

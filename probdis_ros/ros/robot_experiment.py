@@ -101,6 +101,13 @@ def float_arguments(values: dict[str, float]) -> list[str]:
     return args
 
 
+#: What an offline run's record keeps of its physics episode's summary (a run through the
+#: nodes has only what its bag tells).
+PHYSICS_FIGURES = ('message', 'peak_contact_force_n', 'peak_table_force_n', 'lowest_m',
+                   'peak_external_torque_nm', 'command_speed_peak', 'sent_speed_peak',
+                   'sim_time_s')
+
+
 def offline_run(scenario: str, method: Method, run: int, velocity_scaling: float,
                 detection: dict[str, float], jtc_start: str = DEFAULT_JTC_START,
                 faults: dict[str, float] | None = None) -> dict:
@@ -124,14 +131,8 @@ def offline_run(scenario: str, method: Method, run: int, velocity_scaling: float
                                   robot_settings=robot, physics_settings=physics)
     summary = episode.summary()
     return {'success': summary['success'], 'paths': summary['paths'],
-            'failures': summary['failures'], 'bag': None, 'message': summary['message'],
-            'peak_contact_force_n': summary['peak_contact_force_n'],
-            'peak_table_force_n': summary['peak_table_force_n'],
-            'lowest_m': summary['lowest_m'],
-            'peak_external_torque_nm': summary['peak_external_torque_nm'],
-            'command_speed_peak': summary['command_speed_peak'],
-            'sent_speed_peak': summary['sent_speed_peak'],
-            'sim_time_s': summary['sim_time_s']}
+            'failures': summary['failures'], 'bag': None,
+            **{name: summary[name] for name in PHYSICS_FIGURES}}
 
 
 #: The value of a run setting (engine, velocity_scaling, offline, detection, jtc_start,
@@ -221,9 +222,7 @@ def run_robot_experiment(out: Path, scenarios: list[str], methods: list[Method],
                       'failures': result['failures'], 'wall_s': time.monotonic() - t0,
                       'bag': result['bag'], 'offline': offline, 'detection': detection,
                       'jtc_start': jtc_start, 'faults': faults}
-            for name in ('peak_contact_force_n', 'peak_table_force_n', 'lowest_m',
-                         'peak_external_torque_nm', 'sim_time_s', 'message',
-                         'command_speed_peak', 'sent_speed_peak'):
+            for name in PHYSICS_FIGURES:
                 if name in result:
                     record[name] = result[name]
             if result['bag'] and sim_time:
