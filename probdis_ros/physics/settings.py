@@ -38,9 +38,10 @@ class PhysicsSettings:
     object_mass_error: float = 0.0
     #: Reflected motor inertia per joint [kg m^2].  Not published by KUKA; a small value
     #: (A7's own link inertia is ~0.001).  Franka gives its FR3 0.21-0.61 (as quoted in
-    #: Drake's franka_description README), so the iiwa's motors may well reflect more;
-    #: joint-torque feedback in KUKA's impedance control reduces what the links feel.  The implicit damping already keeps A7 from the
-    #: limit cycle of an explicit PD (DESIGN.md "Facts: a physics-simulated iiwa"): measured
+    #: Drake's franka_description README), so the iiwa's motors may well reflect more,
+    #: though joint-torque feedback in KUKA's impedance control may hide some of it from
+    #: the links.  The implicit damping already keeps A7 from the limit cycle of an
+    #: explicit PD (DESIGN.md "Facts: a physics-simulated iiwa"): measured
     #: stable with 0 too, at 1 and 2 ms.
     armature: tuple[float, ...] = (0.01,) * 7
     #: Rotational stiffness of the grasp [Nm/rad] about each flange axis: the object turns
