@@ -225,6 +225,76 @@ def cmd_experiment_report(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_experiment_bound(args: argparse.Namespace) -> int:
+    """Bound the plate_hole success of any search; compare sweeps' methods with the bounds."""
+    import time
+
+    from probdis_ros.experiments.hole_search import (
+        mean_curves,
+        mean_paths,
+        method_curves,
+        plot_bounds,
+        PRIORS,
+        world_bound,
+    )
+    from probdis_ros.experiments.report import check_records
+    from probdis_ros.experiments.sweep import EPISODES_FILE, progress_line, read_episodes
+
+    if args.worlds < 1 or args.seed < 0 or args.max_paths < 1:
+        raise UsageError('--worlds and --max-paths must be positive, --seed not negative')
+    records = []
+    for directory in args.episodes or ():
+        path = Path(directory) / EPISODES_FILE
+        if not path.is_file():
+            raise UsageError(f'--episodes {directory}: no {EPISODES_FILE} there')
+        records += check_records(read_episodes(path), path)
+    if args.out:
+        _check_output(args.out, '--out', folder=True)
+    seeds = list(range(args.seed, args.seed + args.worlds))
+    bounds, t0 = [], time.monotonic()
+    for done, seed in enumerate(seeds, start=1):
+        bounds.append(world_bound(seed))
+        progress_line(done, len(seeds), time.monotonic() - t0, 'worlds')
+    paths = args.max_paths
+    curves = mean_curves(bounds, paths)
+    methods = method_curves(records, seeds, paths)
+    worlds = f'seeds {seeds[0]}-{seeds[-1]}'
+    doc = {'family': 'plate_hole', 'seeds': [seeds[0], seeds[-1]], 'max_paths': paths,
+           'bounds': {p: {'within': curves[p], 'mean_paths': mean_paths(bounds, p, paths)}
+                      for p in PRIORS},
+           'methods': methods}
+    if args.out:
+        out = Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        with (out / 'hole_bound.jsonl').open('w') as f:
+            for bound in bounds:
+                f.write(json.dumps(bound.to_dict()) + '\n')
+        (out / 'hole_bound.json').write_text(json.dumps(doc, indent=1) + '\n')
+        doc['files'] = ['hole_bound.jsonl', 'hole_bound.json',
+                        plot_bounds(curves, methods, worlds, out / 'hole_bound.png').name]
+    if args.json:
+        _print_json(doc)
+        return 0
+    marks = [n for n in (1, 2, 5, 10, 20, paths) if n <= paths]
+    marks = sorted(set(marks))
+    print(f'plate_hole, {worlds} ({len(seeds)} worlds): share of worlds out within n paths')
+    print('| searcher or method | ' + ' | '.join(f'n = {n}' for n in marks) +
+          ' | mean paths when out |')
+    print('| --- |' + ' --- |' * (len(marks) + 1))
+    names = {'box': 'bound: knows the box, not where on a side',
+             'generator': "knows the generator's spread",
+             'direction': 'straight lines from the start'}
+    for prior in PRIORS:
+        row = ' | '.join(f'{curves[prior][n - 1]:.2f}' for n in marks)
+        print(f'| {names[prior]} | {row} | {mean_paths(bounds, prior, paths):.1f} |')
+    for method, found in methods.items():
+        row = ' | '.join(f'{found["within"][n - 1]:.2f}' for n in marks)
+        print(f'| {method} | {row} | {found["mean_paths"]:.1f} |')
+    if args.out:
+        print(f'wrote {", ".join(doc["files"])} in {args.out}')
+    return 0
+
+
 def _name_values(flag: str, items: list[str] | None, known: Collection[str],
                  what: str) -> dict[str, float]:
     """Parse repeated ``NAME=VALUE`` options, refusing unknown names and values not numbers."""
@@ -1098,6 +1168,18 @@ def build_parser() -> argparse.ArgumentParser:
                         "compared world by world with the paper's (repeatable; the report "
                         'is written into the first directory)')
     report.set_defaults(handler=cmd_experiment_report)
+    bound = exp_sub.add_parser('bound', help='plate_hole: how many worlds any search could '
+                               'get out of within n paths, beside the methods of sweeps')
+    bound.add_argument('--worlds', type=int, default=100, help='plate_hole worlds (100)')
+    bound.add_argument('--seed', type=int, default=0, help='the first world seed (0)')
+    bound.add_argument('--max-paths', type=int, default=20, help='paths per episode (20)')
+    bound.add_argument('--episodes', action='append', metavar='DIR',
+                       help="a sweep's directory: its methods' plate_hole episodes on these "
+                       'worlds beside the bounds (repeatable)')
+    bound.add_argument('--out', help='directory for hole_bound.jsonl (per world), '
+                       'hole_bound.json and hole_bound.png')
+    bound.add_argument('--json', action='store_true', help='print the curves as JSON')
+    bound.set_defaults(handler=cmd_experiment_bound)
     robot = exp_sub.add_parser('robot', help='the robot scenarios through the ROS nodes '
                                "against the mock iiwa, like the paper's Table I")
     robot.add_argument('--runs', type=int, help='runs per scenario and method (run r uses '

@@ -262,13 +262,13 @@ def run_sweep(keys: list[EpisodeKey], out: Path, max_paths: int = 20,
     return SweepReport(len(keys), len(keys) - len(todo), len(todo), time.monotonic() - t0)
 
 
-def progress_line(done: int, total: int, elapsed: float) -> None:
+def progress_line(done: int, total: int, elapsed: float, unit: str = 'episodes') -> None:
     """Print ``[#####.....] done/total, elapsed, time left`` on one refreshed stderr line."""
     width = 30
     filled = int(width * done / total)
     left = elapsed / done * (total - done)
     end = '\n' if done == total else ''
-    print(f'\r[{"#" * filled}{"." * (width - filled)}] {done}/{total} episodes, '
+    print(f'\r[{"#" * filled}{"." * (width - filled)}] {done}/{total} {unit}, '
           f'{_clock(elapsed)} elapsed, {_clock(left)} left ', end=end, file=sys.stderr,
           flush=True)
 

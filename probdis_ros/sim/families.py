@@ -83,6 +83,10 @@ FAMILIES = ('open_box', 'closed_box', 'plate_hole', 'hook_bar', 'clutter')
 WALL_TILE = 0.2
 #: Tile of a plate around its hole: small, so the ring of the hole stays small.
 PLATE_TILE = 0.06
+#: [m] a plate's hole keeps its rim at least this far from the plate's edges ...
+HOLE_MARGIN = 0.02
+#: ... and its centre within this share of the room that leaves, around the plate's centre.
+HOLE_SPREAD = 0.5
 #: Relative overlap of neighbouring discs, so that no seam lets the point through.
 OVERLAP = 1.02
 _AXES = ('x', 'y', 'z')
@@ -243,8 +247,8 @@ def plate_hole(rng: np.random.Generator, x_start: np.ndarray, q_start: np.ndarra
     hole = float(rng.uniform(0.03, 0.06))
     k, sign = divmod(face, 2)
     i, j = [m for m in range(3) if m != k]
-    room = np.maximum(half[[i, j]] - hole - 0.02, 0.0)
-    shift = rng.uniform(-0.5, 0.5, size=2) * room
+    room = np.maximum(half[[i, j]] - hole - HOLE_MARGIN, 0.0)
+    shift = rng.uniform(-HOLE_SPREAD, HOLE_SPREAD, size=2) * room
     plate_center = center + (1 - 2 * sign) * half[k] * rot[:, k]
     hole_at = plate_center + shift[0] * rot[:, i] + shift[1] * rot[:, j]
     plate = _plate_with_hole(plate_center, rot[:, i], rot[:, j], half[i], half[j], hole_at,

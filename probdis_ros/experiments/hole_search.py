@@ -1,0 +1,294 @@
+# Copyright 2026 probdis_ros contributors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+How many ``plate_hole`` worlds could any search get out of within n paths: upper bounds.
+
+In the kinematic simulator a blocked path ends where the flange first meets a surface: each
+path tests one point of the trap, and gets out only if that point lies in the hole (the
+flange is a point; the hole's rim has radius r).  Whatever a method learns from its
+failures, it cannot do better than a searcher that knows the trap's geometry and tests the
+likeliest points first; how well that searcher does depends on what it knows of where the
+hole is.  Per world, three searchers:
+
+``box``
+    Knows the box exactly, and that the hole lies on one of its six sides (1/6 each, as the
+    generator draws them) with its rim at least ``HOLE_MARGIN`` from the side's edges,
+    anywhere there.  One path tests one point, which finds the holes whose opening holds
+    it: at most ``a / A`` of a side whose possible centres cover A (all of it if A is
+    smaller), a the opening's area (``pi r^2`` and the few per cent the ring's cusps add).
+    The best n paths take the largest such shares first (a side's add up until it is
+    covered).  On boxes whose holes lie anywhere on a side, no method does better on
+    average: an upper bound, and a generous one (openings cannot tile a side without
+    overlap, and a method must learn the box from its blocks).  On the generator's worlds a
+    method can beat it only by favouring the sides' middles, where the generator puts holes.
+``generator``
+    Knows also that this generator draws the centre within ``HOLE_SPREAD`` of the room
+    around the side's centre: a prior no method should be given, shown because it is what a
+    method tuned to the generator could reach.
+``direction``
+    Knows nothing of the box and sends straight lines from the start, the hole's direction
+    uniform on the sphere: each line finds it with the hole's share of the sphere of
+    directions (its solid angle over 4 pi), so at most ``min(1, n share)``.  Not a bound on
+    methods whose paths are not such lines; a yardstick for straight probes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+import math
+
+import numpy as np
+from probdis_ros.sim.families import (
+    FamilyWorld,
+    HOLE_MARGIN,
+    HOLE_SPREAD,
+    random_family_world,
+)
+from probdis_ros.sim.obstacles import Obstacle
+
+FAMILY = 'plate_hole'
+PRIORS = ('box', 'generator', 'direction')
+#: directions of the Fibonacci lattice that measure a hole's solid angle (deterministic)
+DIRECTIONS = 400_000
+
+
+def fibonacci_sphere(count: int) -> np.ndarray:
+    """Return ``count`` unit vectors spread evenly over the sphere (a Fibonacci lattice)."""
+    i = np.arange(count) + 0.5
+    polar = np.arccos(1.0 - 2.0 * i / count)
+    azimuth = math.pi * (1.0 + math.sqrt(5.0)) * i
+    return np.stack([np.cos(azimuth) * np.sin(polar), np.sin(azimuth) * np.sin(polar),
+                     np.cos(polar)], axis=1)
+
+
+def plate_discs(world: FamilyWorld, hole: np.ndarray, normal: np.ndarray) -> list[Obstacle]:
+    """Return the flat discs of the plate (the hole's ring and the tiles) of a world."""
+    return [o for o in world.obstacles if o.kind == 'disc' and o.normal is not None
+            and abs(abs(float(o.normal @ normal)) - 1.0) < 1e-9
+            and abs(float((o.center - hole) @ normal)) < 1e-9]
+
+
+def open_in_plate(points: np.ndarray, discs: list[Obstacle]) -> np.ndarray:
+    """Tell which points of the plate's plane no disc of the plate covers."""
+    covered = np.zeros(len(points), dtype=bool)
+    for disc in discs:
+        covered |= np.linalg.norm(points - disc.center, axis=1) < disc.radius
+    return ~covered
+
+
+def open_area(hole: np.ndarray, radius: float, normal: np.ndarray, discs: list[Obstacle],
+              cells: int = 600) -> float:
+    """
+    Return the area of the hole as the plate's discs leave it open [m^2].
+
+    A little more than pi r^2: between the ring's discs, which touch the rim, the opening
+    reaches a few per cent beyond it.  Counted on a grid of ``cells`` squared over the
+    square of side 3 r about the centre (the opening lies within 1.1 r).
+    """
+    u = np.cross(normal, [1.0, 0.0, 0.0] if abs(normal[0]) < 0.9 else [0.0, 1.0, 0.0])
+    u /= np.linalg.norm(u)
+    v = np.cross(normal, u)
+    side = 3.0 * radius
+    g = (np.arange(cells) + 0.5) / cells * side - side / 2
+    a, b = (m.ravel() for m in np.meshgrid(g, g))
+    points = hole + a[:, None] * u + b[:, None] * v
+    return float(open_in_plate(points, discs).mean()) * side ** 2
+
+
+def direction_share(start: np.ndarray, hole: np.ndarray, radius: float, normal: np.ndarray,
+                    discs: list[Obstacle], directions: int = DIRECTIONS) -> float:
+    """
+    Return the share of directions from ``start`` whose straight line leaves by the hole.
+
+    A line leaves where it meets the plate's plane near the hole (within 1.5 r) and no disc
+    of the plate covers that point; counted on a Fibonacci lattice of ``directions``.  The
+    start lies inside a convex box whose side the plate is, so no other wall comes first.
+    """
+    height = float((hole - start) @ normal)
+    if height < 0:
+        normal, height = -normal, -height
+    d = fibonacci_sphere(directions)
+    toward = d @ normal
+    ahead = toward > 1e-12
+    crossing = start + (height / np.where(ahead, toward, 1.0))[:, None] * d
+    near = ahead & (np.linalg.norm(crossing - hole, axis=1) < 1.5 * radius)
+    return float(open_in_plate(crossing[near], discs).sum()) / directions
+
+
+def side_shares(half: np.ndarray, radius: float, opening: float, spread: float) -> list[float]:
+    """
+    Return per side of the box the share of the hole's centres one tested point can find.
+
+    Of a box of half-sizes ``half``, at most 1 per side.  A point finds the holes whose
+    opening (area ``opening``) holds it.  The centres lie in a rectangle ``spread`` times
+    the room on each axis wide (room: the half-size less the hole's radius and
+    ``HOLE_MARGIN``): ``spread = 2`` anywhere the hole fits, ``2 * HOLE_SPREAD`` as the
+    generator draws them.
+    """
+    shares = []
+    for normal_axis in range(3):
+        i, j = [m for m in range(3) if m != normal_axis]
+        room = np.maximum(np.asarray(half, float)[[i, j]] - radius - HOLE_MARGIN, 0.0)
+        area = float(np.prod(spread * room))
+        share = 1.0 if area <= opening else opening / area
+        shares += [share, share]
+    return shares
+
+
+def best_search(shares: list[float], paths: int) -> list[float]:
+    """
+    Return the chance of having found the hole within 1..paths points, testing at best.
+
+    Each side (1/6 of the chance) gains ``share`` per point until covered; taking the
+    largest gain at each step is optimal for such gains (each side's do not grow).
+    """
+    tested = [0] * len(shares)
+    found, curve = 0.0, []
+    for _ in range(paths):
+        gains = [min(s, max(0.0, 1.0 - k * s)) for s, k in zip(shares, tested)]
+        best = int(np.argmax(gains))
+        tested[best] += 1
+        found += gains[best] / len(shares)
+        curve.append(min(found, 1.0))
+    return curve
+
+
+@dataclass(frozen=True)
+class HoleBound:
+    """What bounds the search of one ``plate_hole`` world."""
+
+    seed: int
+    hole_radius: float
+    opening_m2: float             # the hole's open area, a few per cent above pi r^2
+    hole_distance: float          # [m] from the flange's start to the hole's centre
+    direction_share: float        # of the sphere of directions from the start
+    box_shares: tuple[float, ...]
+    generator_shares: tuple[float, ...]
+
+    def curve(self, prior: str, paths: int) -> list[float]:
+        """Return the searcher's chance of being out within 1..paths paths."""
+        if prior == 'direction':
+            return [min(1.0, n * self.direction_share) for n in range(1, paths + 1)]
+        if prior == 'box':
+            return best_search(list(self.box_shares), paths)
+        if prior == 'generator':
+            return best_search(list(self.generator_shares), paths)
+        raise ValueError(f'unknown prior {prior!r}; choose from {", ".join(PRIORS)}')
+
+    def to_dict(self) -> dict:
+        """Return the bound as a JSON-ready record."""
+        return {**asdict(self), 'box_shares': list(self.box_shares),
+                'generator_shares': list(self.generator_shares)}
+
+
+def hole_bound(world: FamilyWorld, seed: int, directions: int = DIRECTIONS) -> HoleBound:
+    """Return the bounds of a ``plate_hole`` world from its parameters and start."""
+    if world.family != FAMILY:
+        raise ValueError(f'the bounds are of {FAMILY} worlds, not {world.family or "this"}')
+    p = world.params
+    axes = np.array(p['axes'])
+    half, radius = np.array(p['half_size']), float(p['hole_radius'])
+    hole = np.array(p['hole_center'])
+    normal = axes['xyz'.index(p['plate_side'][1])]      # the plate's side: '+x' ... '-z'
+    normal = normal / np.linalg.norm(normal)
+    # the discs' own normal and centre, exact where the parameters are rounded
+    ring = min((o for o in world.obstacles if o.kind == 'disc' and o.normal is not None
+                and abs(float(o.normal @ normal)) > 0.999),
+               key=lambda o: float(np.linalg.norm(o.center - hole)))
+    normal = ring.normal / np.linalg.norm(ring.normal)
+    hole = hole - float((hole - ring.center) @ normal) * normal
+    discs = plate_discs(world, ring.center, normal)
+    opening = open_area(hole, radius, normal, discs)
+    start = world.arm.fk(world.start).positions[0]
+    return HoleBound(seed, radius, opening, float(np.linalg.norm(hole - start)),
+                     direction_share(start, hole, radius, normal, discs, directions),
+                     tuple(side_shares(half, radius, opening, 2.0)),
+                     tuple(side_shares(half, radius, opening, 2.0 * HOLE_SPREAD)))
+
+
+def world_bound(seed: int) -> HoleBound:
+    """Return the bounds of the ``plate_hole`` world of ``seed``."""
+    return hole_bound(random_family_world(FAMILY, seed), seed)
+
+
+def mean_curves(bounds: list[HoleBound], paths: int) -> dict[str, list[float]]:
+    """Return each searcher's share of the worlds out within 1..paths, averaged."""
+    return {prior: np.mean([b.curve(prior, paths) for b in bounds], axis=0).tolist()
+            for prior in PRIORS}
+
+
+def mean_paths(bounds: list[HoleBound], prior: str, paths: int) -> float:
+    """Return the searcher's mean paths over the worlds it gets out of, as a report counts."""
+    found = total = 0.0
+    for b in bounds:
+        curve = np.concatenate([[0.0], b.curve(prior, paths)])
+        steps = np.diff(curve)
+        found += float(steps.sum())
+        total += float(steps @ np.arange(1, paths + 1))
+    return total / found if found else math.nan
+
+
+def method_curves(records: list[dict], seeds: list[int], paths: int
+                  ) -> dict[str, dict]:
+    """
+    Return each method's share of the worlds out within 1..paths, on exactly these seeds.
+
+    ``records`` are sweep episodes; methods without an episode on every seed are left out.
+    Per method: ``within`` (the curve) and ``mean_paths`` (of the worlds it got out of).
+    """
+    by_method: dict[str, dict[int, dict]] = {}
+    for r in records:
+        if r.get('family') == FAMILY and r.get('world_seed') in seeds:
+            by_method.setdefault(r['method'], {})[r['world_seed']] = r
+    curves = {}
+    for method, episodes in sorted(by_method.items()):
+        if len(episodes) < len(seeds):
+            continue
+        taken = np.array([e['paths'] if e['success'] else paths + 1 for e in episodes.values()])
+        out = taken[taken <= paths]
+        curves[method] = {'within': [float(np.mean(taken <= n)) for n in range(1, paths + 1)],
+                          'mean_paths': float(out.mean()) if out.size else math.nan}
+    return curves
+
+
+def plot_bounds(bounds_curves: dict[str, list[float]], methods: dict[str, dict],
+                worlds: str, out) -> object:
+    """Draw the searchers' bounds (dashed) and the methods' success within n paths."""
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    from probdis_ros.plots import _save
+
+    fig, ax = plt.subplots(figsize=(8.5, 3.6))
+    labels = {'box': 'bound: knows the box, not where on a side',
+              'generator': "knows the generator's spread (no method should)",
+              'direction': 'straight lines from the start, knowing nothing'}
+    for k, (prior, curve) in enumerate(bounds_curves.items()):
+        n = np.arange(1, len(curve) + 1)
+        ax.step(n, curve, where='post', ls='--', color=plt.cm.Greys(0.9 - 0.25 * k),
+                label=labels[prior])
+    for k, (method, found) in enumerate(methods.items()):
+        curve = found['within']
+        n = np.arange(1, len(curve) + 1)
+        ax.step(n, curve, where='post', color=plt.cm.tab10(k), lw=1.5, label=method)
+    ax.axhline(0.9, color='tab:red', lw=0.8, alpha=0.5, label='0.90')
+    ax.set_ylim(0, 1.02)
+    ax.set_xticks(range(0, len(next(iter(bounds_curves.values()))) + 1, 2))
+    ax.set_xlabel('paths')
+    ax.set_ylabel('share of worlds out')
+    ax.set_title(f'plate_hole, {worlds}: out within n paths', fontsize=9)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7, loc='upper left', bbox_to_anchor=(1.02, 1.0))
+    return _save(fig, out)
