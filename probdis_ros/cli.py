@@ -258,6 +258,10 @@ def cmd_experiment_bound(args: argparse.Namespace) -> int:
     paths = args.max_paths
     curves = mean_curves(bounds, paths)
     methods = method_curves(records, seeds, paths)
+    if records and not methods:
+        print(f'note: no method of {", ".join(args.episodes)} has a plate_hole episode on '
+              f'every world of seeds {seeds[0]}-{seeds[-1]} (was it swept with --seed '
+              f'{args.seed}?)', file=sys.stderr)
     worlds = f'seeds {seeds[0]}-{seeds[-1]}'
     doc = {'family': 'plate_hole', 'seeds': [seeds[0], seeds[-1]], 'max_paths': paths,
            'bounds': {p: {'within': curves[p], 'mean_paths': mean_paths(bounds, p, paths)}

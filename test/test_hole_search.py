@@ -117,7 +117,9 @@ def test_the_command_bounds_the_worlds_and_sets_the_methods_beside(tmp_path):
     for prior in PRIORS:
         within = doc['bounds'][prior]['within']
         assert all(a <= b + 1e-12 for a, b in itertools.pairwise(within)) and within[-1] <= 1
-    table = run_probdis('experiment', 'bound', '--worlds', '2', '--seed', '1000').stdout
-    assert '| bound: knows the box, not where on a side |' in table
+    other = run_probdis('experiment', 'bound', '--worlds', '2', '--seed', '1001',
+                        '--episodes', str(sweep))
+    assert '| bound: knows the box, not where on a side |' in other.stdout
+    assert 'epsilon' not in other.stdout and 'no method of' in other.stderr
     bad = run_probdis('experiment', 'bound', '--episodes', str(tmp_path / 'none'), check=False)
     assert bad.returncode == 2 and 'no episodes.jsonl there' in bad.stderr
