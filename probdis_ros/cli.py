@@ -228,6 +228,7 @@ def cmd_experiment_report(args: argparse.Namespace) -> int:
 def cmd_experiment_bound(args: argparse.Namespace) -> int:
     """Bound the plate_hole success of any search; compare sweeps' methods with the bounds."""
     import time
+    import warnings
 
     from probdis_ros.experiments.hole_search import (
         mean_curves,
@@ -257,7 +258,11 @@ def cmd_experiment_bound(args: argparse.Namespace) -> int:
         progress_line(done, len(seeds), time.monotonic() - t0, 'worlds')
     paths = args.max_paths
     curves = mean_curves(bounds, paths)
-    methods = method_curves(records, seeds, paths)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter('always')
+        methods = method_curves(records, seeds, paths)
+    for warning in caught:
+        print(f'note: {warning.message}', file=sys.stderr)
     if records and not methods:
         print(f'note: no method of {", ".join(args.episodes)} has a plate_hole episode on '
               f'every world of seeds {seeds[0]}-{seeds[-1]} (was it swept with --seed '
@@ -285,9 +290,10 @@ def cmd_experiment_bound(args: argparse.Namespace) -> int:
     print('| searcher or method | ' + ' | '.join(f'n = {n}' for n in marks) +
           ' | mean paths when out |')
     print('| --- |' + ' --- |' * (len(marks) + 1))
-    names = {'box': 'bound: knows the box, not where on a side',
-             'generator': "knows the generator's spread",
-             'direction': 'straight lines from the start'}
+    names = {'box': 'bound if holes lay anywhere on a side (knows the box)',
+             'generator': "bound: knows the generator's spread",
+             'direction': 'straight lines from the start (bound for such lines)',
+             'centre_first': "a search: knows the box, each side's middle first"}
     for prior in PRIORS:
         row = ' | '.join(f'{curves[prior][n - 1]:.2f}' for n in marks)
         print(f'| {names[prior]} | {row} | {mean_paths(bounds, prior, paths):.1f} |')
@@ -1172,8 +1178,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "compared world by world with the paper's (repeatable; the report "
                         'is written into the first directory)')
     report.set_defaults(handler=cmd_experiment_report)
-    bound = exp_sub.add_parser('bound', help='plate_hole: how many worlds any search could '
-                               'get out of within n paths, beside the methods of sweeps')
+    bound = exp_sub.add_parser('bound', help='plate_hole: bounds on what a search that feels '
+                               'blocks could do within n paths, a search that knows the box, '
+                               'and the methods of sweeps beside them')
     bound.add_argument('--worlds', type=int, default=100, help='plate_hole worlds (100)')
     bound.add_argument('--seed', type=int, default=0, help='the first world seed (0)')
     bound.add_argument('--max-paths', type=int, default=20, help='paths per episode (20)')

@@ -13,14 +13,14 @@
 # limitations under the License.
 
 """
-How many ``plate_hole`` worlds could any search get out of within n paths: upper bounds.
+How many ``plate_hole`` worlds could a search get out of within n paths: bounds, and one search.
 
 In the kinematic simulator a blocked path ends where the flange first meets a surface: each
 path tests one point of the trap, and gets out only if that point lies in the hole (the
 flange is a point; the hole's rim has radius r).  Whatever a method learns from its
 failures, it cannot do better than a searcher that knows the trap's geometry and tests the
 likeliest points first; how well that searcher does depends on what it knows of where the
-hole is.  Per world, three searchers:
+hole is.  Per world, three such bounds and one search that could be run:
 
 ``box``
     Knows the box exactly, and that the hole lies on one of its six sides (1/6 each, as the
@@ -29,25 +29,32 @@ hole is.  Per world, three searchers:
     it: at most ``a / A`` of a side whose possible centres cover A (all of it if A is
     smaller), a the opening's area (``pi r^2`` and the few per cent the ring's cusps add).
     The best n paths take the largest such shares first (a side's add up until it is
-    covered).  On boxes whose holes lie anywhere on a side, no method does better on
-    average: an upper bound, and a generous one (openings cannot tile a side without
-    overlap, and a method must learn the box from its blocks).  On the generator's worlds a
-    method can beat it only by favouring the sides' middles, where the generator puts holes.
+    covered).  An upper bound for boxes whose holes lie *anywhere* on a side, and a generous
+    one (openings cannot tile a side without overlap, and a method must learn the box from
+    its blocks).  Not a bound on this family's worlds: the generator puts the holes near a
+    side's middle, and a search that tests the middles first (``centre_first``) beats it.
 ``generator``
     Knows also that this generator draws the centre within ``HOLE_SPREAD`` of the room
-    around the side's centre: a prior no method should be given, shown because it is what a
-    method tuned to the generator could reach.
+    around the side's centre: the upper bound on this family's worlds for any search that
+    tests one point per path.
 ``direction``
     Knows nothing of the box and sends straight lines from the start, the hole's direction
     uniform on the sphere: each line finds it with the hole's share of the sphere of
     directions (its solid angle over 4 pi), so at most ``min(1, n share)``.  Not a bound on
     methods whose paths are not such lines; a yardstick for straight probes.
+``centre_first``
+    A possible search, not a bound, run on each world's own hole: knows the box and the
+    hole's radius, not where the hole is; tests each side on a lattice that covers it,
+    from the side's middle outward, round by round a point on each side.  What a method
+    that learnt the box from its blocks and then searched it with that generic habit
+    could reach.
 """
 
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 import math
+import warnings
 
 import numpy as np
 from probdis_ros.sim.families import (
@@ -59,7 +66,7 @@ from probdis_ros.sim.families import (
 from probdis_ros.sim.obstacles import Obstacle
 
 FAMILY = 'plate_hole'
-PRIORS = ('box', 'generator', 'direction')
+PRIORS = ('box', 'generator', 'direction', 'centre_first')
 #: directions of the Fibonacci lattice that measure a hole's solid angle (deterministic)
 DIRECTIONS = 400_000
 
@@ -165,6 +172,62 @@ def best_search(shares: list[float], paths: int) -> list[float]:
     return curve
 
 
+#: the most points the centre-first search tests (beyond any episode's paths)
+MOST_POINTS = 60
+
+
+def centre_first_points(half: np.ndarray, radius: float, most: int = MOST_POINTS
+                        ) -> list[tuple[int, float, float]]:
+    """
+    Return the centre-first search's points in order: (side, a, b) in the box's axes.
+
+    On each side a hexagonal lattice of spacing ``r sqrt(3)`` (discs of radius r about its
+    points cover the plane), nearest the side's middle first, as far as a hole's centre
+    could lie; round by round a point on each side (the smallest side first), so that
+    every side's middle is tried before any side's second point.
+    """
+    spacing = radius * math.sqrt(3.0)
+    per_side, areas = [], []
+    m = int(0.4 / spacing) + 2
+    lattice = np.array([(spacing * (i + 0.5 * (j % 2)), spacing * math.sqrt(3.0) / 2 * j)
+                        for i in range(-m, m + 1) for j in range(-2 * m, 2 * m + 1)])
+    lattice = lattice[np.argsort(np.hypot(lattice[:, 0], lattice[:, 1]), kind='stable')]
+    for side in range(6):
+        k = side // 2
+        i, j = [n for n in range(3) if n != k]
+        room = np.maximum(np.asarray(half, float)[[i, j]] - radius - HOLE_MARGIN, 0.0)
+        keep = np.all(np.abs(lattice) <= room + radius, axis=1)
+        per_side.append(lattice[keep][:most])
+        areas.append(float(room[0] * room[1]))
+    # round by round, a point on each side, the smallest side first
+    sides = sorted(range(6), key=lambda side: (areas[side], side))
+    order = [(side, float(per_side[side][n][0]), float(per_side[side][n][1]))
+             for n in range(most) for side in sides if n < len(per_side[side])]
+    return order[:most]
+
+
+def centre_first_paths(world: FamilyWorld, discs: list[Obstacle]) -> int:
+    """
+    Return the paths the centre-first search takes to get out of a world (0: not within 60).
+
+    A possible search, not a bound: it knows the box and the hole's radius, not where the
+    hole is, and tests the middle of each side first.
+    """
+    p = world.params
+    axes, center = np.array(p['axes']), np.array(p['center'])
+    half, radius = np.array(p['half_size']), float(p['hole_radius'])
+    plate = 2 * 'xyz'.index(p['plate_side'][1]) + (p['plate_side'][0] == '-')
+    for n, (side, a, b) in enumerate(centre_first_points(half, radius), start=1):
+        if side != plate:
+            continue
+        k = side // 2
+        i, j = [m for m in range(3) if m != k]
+        point = center + (1 - 2 * (side % 2)) * half[k] * axes[k] + a * axes[i] + b * axes[j]
+        if open_in_plate(point[None], discs)[0]:
+            return n
+    return 0
+
+
 @dataclass(frozen=True)
 class HoleBound:
     """What bounds the search of one ``plate_hole`` world."""
@@ -176,9 +239,12 @@ class HoleBound:
     direction_share: float        # of the sphere of directions from the start
     box_shares: tuple[float, ...]
     generator_shares: tuple[float, ...]
+    centre_first_paths: int = 0   # the centre-first search's paths out (0: not within 60)
 
     def curve(self, prior: str, paths: int) -> list[float]:
         """Return the searcher's chance of being out within 1..paths paths."""
+        if prior == 'centre_first':
+            return [float(0 < self.centre_first_paths <= n) for n in range(1, paths + 1)]
         if prior == 'direction':
             return [min(1.0, n * self.direction_share) for n in range(1, paths + 1)]
         if prior == 'box':
@@ -215,7 +281,8 @@ def hole_bound(world: FamilyWorld, seed: int, directions: int = DIRECTIONS) -> H
     return HoleBound(seed, radius, opening, float(np.linalg.norm(hole - start)),
                      direction_share(start, hole, radius, normal, discs, directions),
                      tuple(side_shares(half, radius, opening, 2.0)),
-                     tuple(side_shares(half, radius, opening, 2.0 * HOLE_SPREAD)))
+                     tuple(side_shares(half, radius, opening, 2.0 * HOLE_SPREAD)),
+                     centre_first_paths(world, discs))
 
 
 def world_bound(seed: int) -> HoleBound:
@@ -245,16 +312,27 @@ def method_curves(records: list[dict], seeds: list[int], paths: int
     """
     Return each method's share of the worlds out within 1..paths, on exactly these seeds.
 
-    ``records`` are sweep episodes; methods without an episode on every seed are left out.
-    Per method: ``within`` (the curve) and ``mean_paths`` (of the worlds it got out of).
+    ``records`` are sweep episodes; methods without an episode on every seed are left out
+    with a warning, as are episodes allowed another number of paths; a method's episode on
+    one world twice is refused (ValueError).  Per method: ``within`` (the curve) and
+    ``mean_paths`` (of the worlds it got out of).
     """
     by_method: dict[str, dict[int, dict]] = {}
     for r in records:
         if r.get('family') == FAMILY and r.get('world_seed') in seeds:
-            by_method.setdefault(r['method'], {})[r['world_seed']] = r
+            if r.get('max_paths', paths) != paths:
+                warnings.warn(f'{r["method"]} on world {r["world_seed"]} was allowed '
+                              f'{r["max_paths"]} paths, not {paths}: left out', stacklevel=2)
+                continue
+            episodes = by_method.setdefault(r['method'], {})
+            if r['world_seed'] in episodes:
+                raise ValueError(f'{r["method"]} on plate_hole world {r["world_seed"]} twice')
+            episodes[r['world_seed']] = r
     curves = {}
     for method, episodes in sorted(by_method.items()):
         if len(episodes) < len(seeds):
+            warnings.warn(f'{method}: episodes on {len(episodes)} of the {len(seeds)} worlds: '
+                          'left out', stacklevel=2)
             continue
         taken = np.array([e['paths'] if e['success'] else paths + 1 for e in episodes.values()])
         out = taken[taken <= paths]
@@ -272,13 +350,14 @@ def plot_bounds(bounds_curves: dict[str, list[float]], methods: dict[str, dict],
     from probdis_ros.plots import _save
 
     fig, ax = plt.subplots(figsize=(8.5, 3.6))
-    labels = {'box': 'bound: knows the box, not where on a side',
-              'generator': "knows the generator's spread (no method should)",
-              'direction': 'straight lines from the start, knowing nothing'}
+    labels = {'box': 'bound if holes lay anywhere on a side (knows the box)',
+              'generator': "bound: knows the generator's spread",
+              'direction': 'straight lines from the start, knowing nothing',
+              'centre_first': "knows the box, tests each side's middle first"}
     for k, (prior, curve) in enumerate(bounds_curves.items()):
         n = np.arange(1, len(curve) + 1)
-        ax.step(n, curve, where='post', ls='--', color=plt.cm.Greys(0.9 - 0.25 * k),
-                label=labels[prior])
+        ax.step(n, curve, where='post', ls=':' if prior == 'centre_first' else '--',
+                color=('k', '0.45', '0.7', 'tab:purple')[k % 4], label=labels[prior])
     for k, (method, found) in enumerate(methods.items()):
         curve = found['within']
         n = np.arange(1, len(curve) + 1)
