@@ -27,8 +27,7 @@ import json
 import sys
 
 import numpy as np
-
-HOLE_MARGIN = 0.02
+from probdis_ros.sim.families import HOLE_MARGIN
 
 
 def rerun() -> None:
