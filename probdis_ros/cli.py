@@ -296,7 +296,7 @@ def cmd_experiment_bound(args: argparse.Namespace) -> int:
              'centre_first': "a search: knows the box, each side's middle first"}
     for prior in PRIORS:
         row = ' | '.join(f'{curves[prior][n - 1]:.2f}' for n in marks)
-        print(f'| {names[prior]} | {row} | {mean_paths(bounds, prior, paths):.1f} |')
+        print(f'| {names[prior]} | {row} | {doc["bounds"][prior]["mean_paths"]:.1f} |')
     for method, found in methods.items():
         row = ' | '.join(f'{found["within"][n - 1]:.2f}' for n in marks)
         print(f'| {method} | {row} | {found["mean_paths"]:.1f} |')

@@ -59,7 +59,7 @@ import warnings
 import numpy as np
 from probdis_ros.sim.families import (
     FamilyWorld,
-    HOLE_MARGIN,
+    hole_room,
     HOLE_SPREAD,
     random_family_world,
 )
@@ -146,8 +146,7 @@ def side_shares(half: np.ndarray, radius: float, opening: float, spread: float) 
     """
     shares = []
     for normal_axis in range(3):
-        i, j = [m for m in range(3) if m != normal_axis]
-        room = np.maximum(np.asarray(half, float)[[i, j]] - radius - HOLE_MARGIN, 0.0)
+        room = hole_room(half, radius, normal_axis)
         area = float(np.prod(spread * room))
         share = 1.0 if area <= opening else opening / area
         shares += [share, share]
@@ -193,9 +192,7 @@ def centre_first_points(half: np.ndarray, radius: float, most: int = MOST_POINTS
                         for i in range(-m, m + 1) for j in range(-2 * m, 2 * m + 1)])
     lattice = lattice[np.argsort(np.hypot(lattice[:, 0], lattice[:, 1]), kind='stable')]
     for side in range(6):
-        k = side // 2
-        i, j = [n for n in range(3) if n != k]
-        room = np.maximum(np.asarray(half, float)[[i, j]] - radius - HOLE_MARGIN, 0.0)
+        room = hole_room(half, radius, side // 2)
         keep = np.all(np.abs(lattice) <= room + radius, axis=1)
         per_side.append(lattice[keep][:most])
         areas.append(float(room[0] * room[1]))

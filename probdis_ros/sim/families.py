@@ -165,6 +165,17 @@ def _plate_with_hole(center: np.ndarray, u: np.ndarray, v: np.ndarray, a: float,
     return ring + tiles
 
 
+def hole_room(half: np.ndarray, hole: float, normal_axis: int) -> np.ndarray:
+    """
+    Return the room a hole of radius ``hole`` leaves on a box's side, along its two axes.
+
+    The side is the one across ``normal_axis`` of a box of half-sizes ``half``: its
+    half-extents less the hole's radius and ``HOLE_MARGIN`` (at least 0).
+    """
+    i, j = [m for m in range(3) if m != normal_axis]
+    return np.maximum(np.asarray(half, dtype=float)[[i, j]] - hole - HOLE_MARGIN, 0.0)
+
+
 def _box(center: np.ndarray, rot: np.ndarray, half: np.ndarray, gate: np.ndarray | None,
          skip: int | None = None) -> list[Obstacle]:
     """Return the walls of a box (axes the columns of rot), all but face ``skip`` (0-5)."""
@@ -247,7 +258,7 @@ def plate_hole(rng: np.random.Generator, x_start: np.ndarray, q_start: np.ndarra
     hole = float(rng.uniform(0.03, 0.06))
     k, sign = divmod(face, 2)
     i, j = [m for m in range(3) if m != k]
-    room = np.maximum(half[[i, j]] - hole - HOLE_MARGIN, 0.0)
+    room = hole_room(half, hole, k)
     shift = rng.uniform(-HOLE_SPREAD, HOLE_SPREAD, size=2) * room
     plate_center = center + (1 - 2 * sign) * half[k] * rot[:, k]
     hole_at = plate_center + shift[0] * rot[:, i] + shift[1] * rot[:, j]
