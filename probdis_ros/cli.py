@@ -231,6 +231,7 @@ def cmd_experiment_bound(args: argparse.Namespace) -> int:
     import warnings
 
     from probdis_ros.experiments.hole_search import (
+        LABELS,
         mean_curves,
         mean_paths,
         method_curves,
@@ -290,13 +291,9 @@ def cmd_experiment_bound(args: argparse.Namespace) -> int:
     print('| searcher or method | ' + ' | '.join(f'n = {n}' for n in marks) +
           ' | mean paths when out |')
     print('| --- |' + ' --- |' * (len(marks) + 1))
-    names = {'box': 'bound if holes lay anywhere on a side (knows the box)',
-             'generator': "bound: knows the generator's spread",
-             'direction': 'straight lines from the start (bound for such lines)',
-             'centre_first': "a search: knows the box, each side's middle first"}
     for prior in PRIORS:
         row = ' | '.join(f'{curves[prior][n - 1]:.2f}' for n in marks)
-        print(f'| {names[prior]} | {row} | {doc["bounds"][prior]["mean_paths"]:.1f} |')
+        print(f'| {LABELS[prior]} | {row} | {doc["bounds"][prior]["mean_paths"]:.1f} |')
     for method, found in methods.items():
         row = ' | '.join(f'{found["within"][n - 1]:.2f}' for n in marks)
         print(f'| {method} | {row} | {found["mean_paths"]:.1f} |')

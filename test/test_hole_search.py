@@ -23,7 +23,9 @@ import numpy as np
 from probdis_ros.experiments.hole_search import (
     best_search,
     centre_first_points,
+    fit_box,
     hole_bound,
+    learned_box_lines,
     MOST_POINTS,
     PRIORS,
     side_shares,
@@ -135,6 +137,56 @@ def test_the_centre_first_search_gets_out_where_the_simulator_lets_it(worlds):
         points = centre_first_points(np.array(world.params['half_size']), bound.hole_radius)
         assert leaves(world, *points[n - 1])
         assert not any(leaves(world, *q) for q in points[:n - 1])
+
+
+def box_stops(rng, count):
+    """Return a random box (rows of axes, centre, half-sizes), a start in it, stops on it."""
+    q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    axes, half = q.T, rng.uniform(0.08, 0.18, size=3)
+    center = rng.normal(size=3)
+    start = center + (rng.uniform(-0.5, 0.5, size=3) * half) @ axes
+    lines = rng.normal(size=(count, 3))
+    lines = np.vstack([lines / np.linalg.norm(lines, axis=1)[:, None], axes, -axes])
+    local_start, local = (start - center) @ axes.T, lines @ axes.T
+    reach = np.where(local > 0, half - local_start, -half - local_start) / local
+    return axes, center, half, start, start + reach.min(axis=1)[:, None] * lines
+
+
+def test_a_box_is_fitted_from_stops_on_its_sides():
+    rng = np.random.default_rng(4)
+    for _ in range(5):
+        axes, center, half, start, stops = box_stops(rng, 24)
+        box = fit_box(stops, start)
+        match = np.abs(box.axes @ axes.T)           # the same axes, in any order and sense
+        order = match.argmax(axis=1)
+        assert sorted(order) == [0, 1, 2] and match.max(axis=1) == pytest.approx(1, abs=1e-9)
+        assert box.center == pytest.approx(center, abs=1e-9)
+        assert box.half == pytest.approx(half[order], abs=1e-9)
+    with pytest.raises(ValueError, match='no box fits'):
+        fit_box(np.zeros((2, 3)), np.ones(3))
+
+
+def line_is_free(world, x0, direction, length=1.0):
+    """Tell whether the straight flange move of length from x0 along direction meets nothing."""
+    end = (x0 + length * direction)[None]
+    return not any(np.isfinite(o.first_hit(x0[None], end))[0] for o in world.obstacles)
+
+
+def test_the_learned_box_search_sees_only_its_stops_and_gets_out_where_the_simulator_lets_it(
+        worlds):
+    for seed, world in worlds.items():
+        bound = hole_bound(world, seed)
+        lines, box = learned_box_lines(world, bound.hole_radius, seed)
+        assert bound.learned_box_paths in (0, len(lines)) and len(lines) <= MOST_POINTS
+        x0 = world.arm.fk(world.start).positions[0]
+        assert [line_is_free(world, x0, u) for u in lines[:-1]] == [False] * (len(lines) - 1)
+        assert line_is_free(world, x0, lines[-1]) == (bound.learned_box_paths > 0)
+        again, _ = learned_box_lines(world, bound.hole_radius, seed)
+        assert np.array_equal(np.array(again), np.array(lines))      # the seed's stream
+        if box is not None:
+            # the box it learnt holds the start and puts its first stops on its faces
+            local = (x0 - box.center) @ box.axes.T
+            assert np.all(np.abs(local) < box.half)
 
 
 def brute_force(shares, paths):

@@ -46,17 +46,28 @@ hole is.  Per world, three such bounds and one search that could be run:
     A possible search, not a bound, run on each world's own hole: knows the box and the
     hole's radius, not where the hole is; tests each side on a lattice that covers it,
     from the side's middle outward, round by round a point on each side.  What a method
-    that learnt the box from its blocks and then searched it with that generic habit
-    could reach.
+    that knew the box and searched it with that generic habit could reach.
+``learned_box``
+    A possible search, not a bound, run in the simulator on each world: the centre-first
+    search of a box it must first learn from its own blocks (it knows that the trap is a
+    box and the hole's radius; it sees where each straight line from the start stopped).
+    A block tells one number, how far its line went; a box takes nine (turn, six sides):
+    :func:`learned_box_paths` spends ten lines to pin it down (three close together give
+    a side's plane, the lines along that side's normal both ways, two across it the turn,
+    four along the remaining axes the other sides), each of them a test of the hole as
+    well, then searches the box it learnt.  What it costs to learn what ``centre_first``
+    is given.
 """
 
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
+import itertools
 import math
 import warnings
 
 import numpy as np
+from probdis_ros.planning.seeds import PLANNER, stream
 from probdis_ros.sim.families import (
     FamilyWorld,
     hole_room,
@@ -66,7 +77,13 @@ from probdis_ros.sim.families import (
 from probdis_ros.sim.obstacles import Obstacle
 
 FAMILY = 'plate_hole'
-PRIORS = ('box', 'generator', 'direction', 'centre_first')
+PRIORS = ('box', 'generator', 'direction', 'centre_first', 'learned_box')
+#: what each searcher knows, as tables and figures name it
+LABELS = {'box': 'bound if holes lay anywhere on a side (knows the box)',
+          'generator': "bound: knows the generator's spread",
+          'direction': 'straight lines from the start (bound for such lines)',
+          'centre_first': "a search: knows the box, each side's middle first",
+          'learned_box': 'a search: learns the box from its blocks, then middles first'}
 #: directions of the Fibonacci lattice that measure a hole's solid angle (deterministic)
 DIRECTIONS = 400_000
 
@@ -225,6 +242,151 @@ def centre_first_paths(world: FamilyWorld, discs: list[Obstacle]) -> int:
     return 0
 
 
+#: [rad] the learned-box search's first three lines lie this far apart (to meet one side)
+TRIANGLE = math.radians(15)
+#: [rad] its two lines across the first side's normal lie this far apart
+ACROSS = math.radians(25)
+#: [rad] it sends a line along each axis of the box it fits, unless one went this near
+AXIS_TRIED = math.radians(10)
+
+
+def first_stop(world: FamilyWorld, start: np.ndarray, direction: np.ndarray,
+               length: float = 1.0) -> np.ndarray | None:
+    """Return where a straight flange move from start first meets an obstacle (None: out)."""
+    end = start + length * direction
+    t = min(float(o.first_hit(start[None], end[None])[0]) for o in world.obstacles)
+    return None if math.isinf(t) else start + t * length * direction
+
+
+def _turned(axis: np.ndarray, v: np.ndarray, angle: float) -> np.ndarray:
+    """Return v turned by angle about a unit axis (Rodrigues)."""
+    return (v * math.cos(angle) + np.cross(axis, v) * math.sin(angle)
+            + axis * float(axis @ v) * (1.0 - math.cos(angle)))
+
+
+def _across(v: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """Return a random unit vector perpendicular to unit v."""
+    a = rng.normal(size=3)
+    a -= float(a @ v) * v
+    return a / np.linalg.norm(a)
+
+
+@dataclass(frozen=True)
+class LearnedBox:
+    """The box the learned-box search believes in: rows of ``axes`` its axes."""
+
+    axes: np.ndarray
+    center: np.ndarray
+    half: np.ndarray
+
+
+#: [m] a stop this near a face of a box lies on it (the walls are exact planes)
+ON_FACE = 0.002
+
+
+def fit_box(stops: np.ndarray, start: np.ndarray) -> LearnedBox:
+    """
+    Return the box that puts the most stops on its faces, the start inside.
+
+    Its first axis is the normal of a plane through three stops with no stop beyond it (a
+    side of a convex box), its second the normal of a plane through the first axis and two
+    stops (a side across it), its extent the stops' extremes along the axes; ties go to
+    the smaller box.  Every such frame is tried.
+    """
+    rel = stops - start
+    best, best_key = None, None
+    for i, j, k in itertools.combinations(range(len(stops)), 3):
+        n1 = np.cross(rel[j] - rel[i], rel[k] - rel[i])
+        if np.linalg.norm(n1) < 1e-9:
+            continue
+        n1 /= np.linalg.norm(n1)
+        n1 = n1 if float(n1 @ rel[i]) > 0 else -n1
+        if np.any(rel @ n1 > float(n1 @ rel[i]) + ON_FACE):
+            continue
+        for a, b in itertools.combinations(range(len(stops)), 2):
+            along = rel[b] - rel[a]
+            along -= float(along @ n1) * n1
+            if np.linalg.norm(along) < 1e-3:
+                continue
+            n2 = np.cross(n1, along / np.linalg.norm(along))
+            axes = np.array([n1, n2, np.cross(n1, n2)])
+            coords = rel @ axes.T
+            low, high = coords.min(axis=0), coords.max(axis=0)
+            on = ((np.abs(coords - low) < ON_FACE) | (np.abs(coords - high) < ON_FACE)).any(1)
+            key = (int(on.sum()), -float(np.prod(high - low)))
+            if best_key is None or key > best_key:
+                best_key = key
+                best = LearnedBox(axes, start + ((low + high) / 2) @ axes, (high - low) / 2)
+    if best is None:
+        raise ValueError('no box fits these stops (fewer than three, or all on a line)')
+    return best
+
+
+def learned_box_lines(world: FamilyWorld, radius: float, seed: int, most: int = MOST_POINTS
+                      ) -> tuple[list[np.ndarray], LearnedBox | None]:
+    """
+    Run the learned-box search in the simulator: its lines' directions, and the box it learnt.
+
+    It sees only where each straight line from the start stopped.  Three lines
+    ``TRIANGLE`` apart meet, most likely, one side: their stops give its plane and normal
+    n1; then lines along n1 and -n1, and two lines ``ACROSS`` apart across n1 (their
+    stops' difference gives the turn about n1 if they meet one side); then a line along
+    each axis of the box that fits the stops best (:func:`fit_box`) both ways, where none
+    went yet; the box that fits all its stops then; then that box's centre-first lattice.
+    It stops at the first line out or after ``most`` lines; draws from the seed's PLANNER
+    stream.  The box is None if a line got out before it was learnt.
+    """
+    start = world.arm.fk(world.start).positions[0]
+    rng = stream(seed, PLANNER)
+    lines: list[np.ndarray] = []
+    stops: list[np.ndarray] = []
+
+    def out(direction: np.ndarray) -> bool:
+        direction = direction / np.linalg.norm(direction)
+        lines.append(direction)
+        stop = first_stop(world, start, direction)
+        if stop is not None:
+            stops.append(stop)
+        return stop is None or len(lines) >= most
+
+    first = rng.normal(size=3)
+    first /= np.linalg.norm(first)
+    a = _across(first, rng)
+    b = np.cross(first, a)
+    triangle = [first] + [_turned(math.cos(t) * a + math.sin(t) * b, first, TRIANGLE)
+                          for t in (0.0, 2 * math.pi / 3)]
+    if any(out(u) for u in triangle):
+        return lines, None
+    n1 = np.cross(stops[1] - stops[0], stops[2] - stops[0])
+    n1 /= np.linalg.norm(n1)
+    n1 = n1 if float(n1 @ (stops[0] - start)) > 0 else -n1
+    w = _across(n1, rng)
+    if any(out(u) for u in (n1, -n1, w, _turned(n1, w, ACROSS))):
+        return lines, None
+    for axis in fit_box(np.array(stops), start).axes:
+        for u in (axis, -axis):
+            if max(float(u @ line) for line in lines) < math.cos(AXIS_TRIED) and out(u):
+                return lines, None
+    box = fit_box(np.array(stops), start)
+    axes = box.axes
+    for side, u, v in centre_first_points(box.half, radius, most):
+        k = side // 2
+        i, j = [m for m in range(3) if m != k]
+        point = (box.center + (1 - 2 * (side % 2)) * box.half[k] * axes[k] + u * axes[i]
+                 + v * axes[j])
+        if out(point - start):
+            break
+    return lines, box
+
+
+def learned_box_paths(world: FamilyWorld, radius: float, seed: int, most: int = MOST_POINTS
+                      ) -> int:
+    """Return the paths the learned-box search takes to get out of a world (0: not within most)."""
+    lines, _ = learned_box_lines(world, radius, seed, most)
+    start = world.arm.fk(world.start).positions[0]
+    return len(lines) if first_stop(world, start, lines[-1]) is None else 0
+
+
 @dataclass(frozen=True)
 class HoleBound:
     """What bounds the search of one ``plate_hole`` world."""
@@ -237,11 +399,13 @@ class HoleBound:
     box_shares: tuple[float, ...]
     generator_shares: tuple[float, ...]
     centre_first_paths: int = 0   # the centre-first search's paths out (0: not within 60)
+    learned_box_paths: int = 0    # the learned-box search's paths out (0: not within 60)
 
     def curve(self, prior: str, paths: int) -> list[float]:
         """Return the searcher's chance of being out within 1..paths paths."""
-        if prior == 'centre_first':
-            return [float(0 < self.centre_first_paths <= n) for n in range(1, paths + 1)]
+        if prior in ('centre_first', 'learned_box'):
+            taken = getattr(self, f'{prior}_paths')
+            return [float(0 < taken <= n) for n in range(1, paths + 1)]
         if prior == 'direction':
             return [min(1.0, n * self.direction_share) for n in range(1, paths + 1)]
         if prior == 'box':
@@ -279,7 +443,8 @@ def hole_bound(world: FamilyWorld, seed: int, directions: int = DIRECTIONS) -> H
                      direction_share(start, hole, radius, normal, discs, directions),
                      tuple(side_shares(half, radius, opening, 2.0)),
                      tuple(side_shares(half, radius, opening, 2.0 * HOLE_SPREAD)),
-                     centre_first_paths(world, discs))
+                     centre_first_paths(world, discs),
+                     learned_box_paths(world, radius, seed))
 
 
 def world_bound(seed: int) -> HoleBound:
@@ -347,14 +512,12 @@ def plot_bounds(bounds_curves: dict[str, list[float]], methods: dict[str, dict],
     from probdis_ros.plots import _save
 
     fig, ax = plt.subplots(figsize=(8.5, 3.6))
-    labels = {'box': 'bound if holes lay anywhere on a side (knows the box)',
-              'generator': "bound: knows the generator's spread",
-              'direction': 'straight lines from the start, knowing nothing',
-              'centre_first': "knows the box, tests each side's middle first"}
     for k, (prior, curve) in enumerate(bounds_curves.items()):
         n = np.arange(1, len(curve) + 1)
-        ax.step(n, curve, where='post', ls=':' if prior == 'centre_first' else '--',
-                color=('k', '0.45', '0.7', 'tab:purple')[k % 4], label=labels[prior])
+        search = prior in ('centre_first', 'learned_box')
+        ax.step(n, curve, where='post', ls=':' if search else '--',
+                color=('k', '0.45', '0.7', 'tab:purple', 'tab:olive')[k % 5],
+                label=LABELS[prior])
     for k, (method, found) in enumerate(methods.items()):
         curve = found['within']
         n = np.arange(1, len(curve) + 1)
