@@ -376,6 +376,9 @@ class Run:
         elif self.phase is Phase.RETREATING:
             if verdict is Verdict.BLOCKED:
                 self._retreat_blocked(detector, now)
+                # JTC would run the retreat on to its end, its command ever farther from the
+                # held arm, the push growing while the next plan is made: stop it here
+                self._stop_arm()
             self.retreat_done_at = now
             self._send_pending()
 

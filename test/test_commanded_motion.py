@@ -289,6 +289,37 @@ def test_an_arm_settling_after_a_blocked_retreat_is_no_foreign_motion():
     assert run.outcome == 'stopped' and 'while at rest between commands' in run.message
 
 
+@pytest.mark.parametrize('start', ['measured', 'desired'])
+def test_a_blocked_retreat_is_stopped_at_once_not_run_on_while_the_next_plan_is_made(start):
+    # JTC runs a command to its end: a retreat blocked and left running would wind its
+    # command ever farther from the held arm (200 Nm/rad on the real arm) until the next
+    # plan comes, which may take seconds
+    loop = Disentangler(ARM, Planner(), Q1, max_paths=5, seed=0, goal_tolerance=0.04)
+    run = Run(ARM, loop, RunSettings(jtc_start=start), clock=lambda: run._now)
+    run.start(0.0, Q0)
+    run.on_plan(loop.next_path(Q0))
+    arm = follows(run.trajectory, run.settings.detection, blocked_at=0.6)
+    t = 0.0
+    while run.phase.value != 'retreating' and t < 5.0:
+        t += 0.01
+        run.on_joint_state(t, arm(t))
+    held = arm(t)
+    retreat = [a for a in run.actions if isinstance(a, Send)][-1].command
+    assert np.abs(retreat.positions[-1] - held).max() > 0.1
+    run.actions.clear()
+    while run.detector is not None and t < 10.0:     # the retreat is blocked too
+        t += 0.01
+        run.on_joint_state(t, held)
+    assert run.active and run.plan_pending           # the next plan is still being made
+    sends = [a.command for a in run.actions if isinstance(a, Send)]
+    assert sends, 'the blocked retreat was left running'
+    assert np.abs(sends[-1].positions[-1] - held).max() < 0.02
+    for k in range(1, 200):                          # and nothing pulls the arm after it
+        run.on_joint_state(t + 0.01 * k, held)
+    assert run.active and sum(isinstance(a, Send) for a in run.actions) == len(sends)
+    assert np.abs(run.trajectory.sample(np.inf)[0] - held).max() < 0.02
+
+
 def test_an_arm_still_running_the_last_command_at_a_new_start_is_no_foreign_motion():
     # the previous run's last command still takes the arm 0.3 rad (L1) on to its end
     end = Q0 + np.array([0.3, 0, 0, 0, 0, 0, 0])
