@@ -204,3 +204,33 @@ def test_bench_plan_times_the_arm_on_its_table(capsys):
     args = parser.parse_args(['plan', '--seeds', '1', '--large', '0', '--table'])
     assert args.handler(args) == 0
     assert 'iiwa with orientation, on its table' in capsys.readouterr().out
+
+
+def test_pruned_chunks_give_every_point_the_same_maximum_bit_for_bit():
+    # the chunk bounds skip failures, and the orientation factor's bound skips the factor of
+    # most that remain: each point's maximum is still that of every failure evaluated
+    from probdis_ros.model import edge_kernels
+    from probdis_ros.model.arms import quaternion_to_rotation
+    from probdis_ros.model.path_cost import edge_points
+
+    rng = np.random.default_rng(33)
+    maps = [(clustered_map(ARM, rng, 400), np.inf), (clustered_map(ARM, rng, 400), 0.25),
+            (scattered_map(ARM, rng, 19), np.inf)]
+    for fmap, reach in maps:
+        pruned = FailureProbabilityObjective(reach=reach).coster(ARM, fmap)
+        every = FailureProbabilityObjective(reach=reach).coster(ARM, fmap,
+                                                                coster_type=UnprunedEdgeCoster)
+        soa = edge_kernels.workspace(len(fmap))
+        p_pruned, p_every = np.empty(edge_kernels.CHUNK), np.empty(edge_kernels.CHUNK)
+        for _ in range(200):
+            a, b = ARM.random_configurations(rng, 2)
+            points = edge_points(a, a + rng.uniform(0.05, 0.5) * (b - a), pruned.delta)[0]
+            points = points[:edge_kernels.CHUNK]
+            poses = ARM.fk(points)
+            pos = np.ascontiguousarray(poses.positions)
+            rot = quaternion_to_rotation(poses.orientations).reshape(-1, 3, 3).copy()
+            for coster, out in ((pruned, p_pruned), (every, p_every)):
+                edge_kernels._chunk_probabilities(pos, rot, len(points), *coster._failures, soa,
+                                                  out, edge_kernels.ALONG_NEAR2,
+                                                  edge_kernels.ALONG_AT_FAILURE)
+            np.testing.assert_array_equal(p_pruned[:len(points)], p_every[:len(points)])
