@@ -39,9 +39,9 @@ joint impedance follows its command with a lag) with where it is.  The L1 gap
   periods either way, while the joints A1-A4 move (:data:`ECHO_JOINTS`): in joint impedance
   they lag the command by tens of milliseconds;
 * **not executed**, where the caller expects the arm to move (``expect_motion``: a path from
-  a free arm), when a gap-based block is seen, ``START_WAIT`` has passed (or the gap exceeds
-  ``START_GAP_FACTOR`` times a ceiling), and the arm has not moved at all since the command
-  began: nothing executes the command (an inactive
+  a free arm), when a gap-based block is seen, ``START_WAIT`` has passed (or a gap exceeds
+  its ceiling: the force stays bounded while a late controller is waited for), and the arm
+  has not moved at all since the command began: nothing executes the command (an inactive
   controller), or something else holds the arm; that is no block to learn.  An arm that
   begins to move later than the command said (a large message delivered late, a busy
   controller) was started late by its controller: the command is judged from when it began
@@ -85,11 +85,10 @@ RISE_WINDOW = 0.1
 NOISE_SIGMAS = 3.0
 #: The arm's position at the start of a command, and now, are averaged over this long [s].
 ENDS = 0.05
-#: A free arm that has not moved this long [s] after a command began is not executing it.
+#: A free arm that has not moved this long [s] after a command began is not executing it
+#: (or sooner, once a gap passes its ceiling: an arm held from rest presses no harder while
+#: the controller may still be taking the command late than a blocked one does).
 START_WAIT = 2.0
-#: ... or sooner, once its gap exceeds the ceilings this many times: an arm held from rest
-#: presses no harder than that while the controller may still be taking the command late.
-START_GAP_FACTOR = 3.0
 #: A controller that took a command later than this [s] after it was sent took it late.
 LATE_TAKE = 0.05
 #: An echo is looked for this far [s] either way of a state's time (the controller's phase
@@ -422,9 +421,8 @@ class BlockDetector:
         """Return a block seen in the gap, or NOT_EXECUTED for an arm that never moved."""
         if not self.started:
             s = self.settings
-            within = (not s.gap_ceiling or self.gap <= START_GAP_FACTOR * s.gap_ceiling) and \
-                (not s.joint_gap_ceiling or
-                 self.joint_gaps.max() <= START_GAP_FACTOR * s.joint_gap_ceiling)
+            within = (not s.gap_ceiling or self.gap <= s.gap_ceiling) and \
+                (not s.joint_gap_ceiling or self.joint_gaps.max() <= s.joint_gap_ceiling)
             if self._history[-1][0] - self.start_time < START_WAIT and within:
                 return Verdict.MOVING             # the controller may take it late
             moved, _ = self.moved()
