@@ -347,6 +347,10 @@ class Run:
             self.following = bool(np.abs(q - self.measured).sum() <= self.settings.detection.d_dist
                                   and (velocity is None or
                                        np.abs(v - velocity).sum() <= FOLLOWING_SPEED))
+            if velocity is None and self.following:
+                # a state without velocities: the arm on its command moves as it says (a
+                # stop or a path from it taken at rest would hold a moving arm dead)
+                self.measured_velocity = v
         if not self.phase.active:
             return
         if self.detector is None:

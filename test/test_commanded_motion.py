@@ -328,6 +328,32 @@ def test_a_blocked_retreat_is_stopped_at_once_not_run_on_while_the_next_plan_is_
     assert np.abs(run.trajectory.sample(np.inf)[0] - held).max() < 0.02
 
 
+@pytest.mark.parametrize('scaling', [0.2, 0.7])
+def test_a_stop_from_states_without_velocities_brakes_the_moving_arm(scaling):
+    # a driver that sends no velocities: the arm on its command moves as the command says;
+    # a stop taken from rest held it dead in one period (30-104 rad/s^2, a review found)
+    loop = Disentangler(ARM, Planner(), Q1, max_paths=5, seed=0, goal_tolerance=0.04)
+    settings = RunSettings(velocity_scaling=scaling)
+    run = Run(ARM, loop, settings, clock=lambda: run._now)
+    run.start(0.0, Q0)
+    run.on_plan(loop.next_path(Q0))
+    jtc = run.trajectory
+    delay = settings.detection.motion_delay
+    t = 0.0
+    while t < 0.4 * jtc.duration:
+        t += 0.01
+        run.on_joint_state(t, jtc.sample(t - delay)[0])        # positions only
+    moving = jtc.sample(t - delay)[1]
+    assert np.abs(moving).max() > 0.1
+    run.actions.clear()
+    run.stop()
+    stop = [a.command for a in run.actions if isinstance(a, Send)][-1]
+    braking = JtcTrajectory(stop, jtc.sample(t - delay)[0], moving, t)
+    first = braking.sample(0.01)[1]
+    assert np.abs(first - moving).max() / 0.01 < 10.0       # rad/s^2: braking, not a wall
+    assert braking.duration > 0.05
+
+
 def test_an_arm_still_running_the_last_command_at_a_new_start_is_no_foreign_motion():
     # the previous run's last command still takes the arm 0.3 rad (L1) on to its end
     end = Q0 + np.array([0.3, 0, 0, 0, 0, 0, 0])

@@ -98,6 +98,7 @@ def test_noise_of_0_005_rad_at_1_khz_is_never_refused():
     ([3.0, *np.zeros(6)], 'A1 velocity 3 rad/s is beyond 1.5 x its limit'),
     ([0.0, 0.0, 0.0, -1e12, 0.0, 0.0, 0.0], 'A4 velocity -1e+12 rad/s'),
     (np.zeros(5), '7 names but 5 velocities'),
+    ([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, np.nan], 'non-finite velocities'),
 ])
 def test_a_velocity_the_arm_cannot_have_is_refused(velocities, reason):
     # every stop and every path starts from the measured velocity: a glitch there would be

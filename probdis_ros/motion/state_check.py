@@ -157,11 +157,14 @@ class StateCheck:
 
     def _velocities(self, names: Sequence[str], velocities: Sequence[float]
                     ) -> np.ndarray | None:
-        """Return the state's velocities (None if it has none); refuse impossible ones."""
+        """Return the state's velocities (None if it has none); refuse impossible ones, NaN too."""
         if len(velocities) and len(velocities) != len(names):
             raise BadJointStateError(f'{len(names)} names but {len(velocities)} velocities')
         v = values_by_name(names, velocities, self.joint_names)
         if v is None:
+            if len(velocities) and not np.all(np.isfinite(np.asarray(velocities, dtype=float))):
+                # dropped, a stop would take the arm for at rest and hold it dead
+                raise BadJointStateError(f'non-finite velocities {list(velocities)}')
             return None
         j = _worst(np.abs(v) - JUMP_SPEED * self.velocity_limits)
         if j is not None:
