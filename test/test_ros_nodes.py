@@ -222,15 +222,20 @@ def test_the_robot_experiment_hands_the_node_its_informed_ideas():
         params('informed:abf')
 
 
-def test_a_goal_outside_the_limits_from_the_start_is_refused_at_start(ros, tmp_path):
+@pytest.mark.parametrize('a1, reason', [
+    (4.0, 'outside the joint limits'),
+    # at the URDF's limit: 2.7e-7 rad past KUKA's 170 degrees, which the driver refuses
+    (2.96706, 'outside the joint limits as KUKA has them'),
+])
+def test_a_goal_outside_the_limits_from_the_start_is_refused_at_start(ros, tmp_path, a1, reason):
     outside = GOAL.copy()
-    outside[0] = 4.0
+    outside[0] = a1
     planner(ros, tmp_path, goal=outside.tolist())
     steady_states(ros)
     wait_for(lambda: ros.status.get('state') == 'idle', 10, 'planner status')
     time.sleep(0.2)
     response = ros.call('start')
-    assert not response.success and 'outside the joint limits' in response.message
+    assert not response.success and reason in response.message
 
 
 @pytest.mark.parametrize('names, positions, reason', [

@@ -54,6 +54,7 @@ import time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 import numpy as np
 from probdis_ros.model import FailureMap, FailureMapError, iiwa_arm
+from probdis_ros.model.arms import GOAL_INSIDE_LIMITS
 from probdis_ros.model.failure_map import set_aside, write_document
 from probdis_ros.model.table import ROBOT_TABLE, Table
 from probdis_ros.motion.detector import DetectorSettings, MotionWatch
@@ -421,6 +422,9 @@ class PlannerNode(Node):
             return f'needs 7 values, has {goal.size}'
         if not np.all(np.isfinite(goal)) or not self.arm.within_limits(goal)[0]:
             return 'outside the joint limits'
+        if not self.arm.within_limits(goal, tol=-GOAL_INSIDE_LIMITS)[0]:
+            return (f'outside the joint limits as KUKA has them (whole degrees): keep it '
+                    f'{GOAL_INSIDE_LIMITS:g} rad inside the URDF\'s')
         return self.arm.table_problem(goal)
 
     def _run_settings(self, changes: dict | None = None) -> RunSettings:
