@@ -591,6 +591,17 @@ class Run:
         """
         command = self._message(motion)
         now = self._time() if planned_at is None else planned_at
+        if self._desired_start:
+            # stamped: JTC runs it on its own time line, from where the command is when it
+            # takes it (its next update once built and delivered).  Unstamped, JTC started it
+            # when taken from its own command, which had moved on: a moving command fell
+            # back by however late it was taken (a review measured A1 at 1.04 rad/s going to
+            # 0.31 rad/s for a period, and with 8 or 20 ms of delivery to -0.73 or -1.77,
+            # past its limit); stamped, a stop taken 0-30 ms late changes speed by at most
+            # 0.2 rad/s in a period (its own deceleration meanwhile).  A stamp ahead of
+            # now would not do: JTC dates its own point before a message a period early,
+            # and blending from it made a bump (0.9 rad/s with 30 ms ahead)
+            command = replace(command, stamp=now)
         self._emit(Send(command, path, now))
         self.motion = motion
         last = self._last_command(now)
@@ -719,7 +730,7 @@ class Run:
         most ``EXTRAPOLATE`` s (a blocked arm barely moves).  When the joint
         states have stopped arriving (older than state_timeout), from where the running
         command has taken the arm by now (the command motion_delay ago): never from a stale
-        position.
+        position.  With a desired start it is stamped (:meth:`_send`).
         """
         now = self._time()
         age = max(now - self.measured_at, 0.0)
@@ -733,7 +744,7 @@ class Run:
             except (RuntimeError, ValueError):      # brake it below at least
                 release = None
         if release is not None:
-            command = self._message(release)
+            command = replace(self._message(release), stamp=now)
             self._emit(Send(command, None, now))
             self.trajectory = taken_trajectory(command, now, last[0], last[1], last,
                                                self.period)
@@ -764,6 +775,8 @@ class Run:
             command = self._message(stop(q, v, a, self.limits))
         except (RuntimeError, ValueError):      # never left without a command to stop
             command = self._message(stop(q, 0 * q, 0 * q, self.limits))   # hold there
+        if last is not None:
+            command = replace(command, stamp=now)
         self._emit(Send(command, None, now))
         # what the arm runs from now on: a later stop without fresh states starts from it
         self.trajectory = taken_trajectory(command, now, q, v, last, self.period)

@@ -35,7 +35,7 @@ from probdis_ros.motion.detector import (
     START_WAIT,
     Verdict,
 )
-from probdis_ros.motion.jtc import JtcTrajectory
+from probdis_ros.motion.jtc import JtcTrajectory, TrajectoryController
 from probdis_ros.motion.profiles import from_state
 from probdis_ros.motion.state_check import BadJointStateError, StateCheck
 from probdis_ros.planning.disentangle import Disentangler
@@ -352,6 +352,41 @@ def test_a_stop_from_states_without_velocities_brakes_the_moving_arm(scaling):
     first = braking.sample(0.01)[1]
     assert np.abs(first - moving).max() / 0.01 < 10.0       # rad/s^2: braking, not a wall
     assert braking.duration > 0.05
+
+
+@pytest.mark.parametrize('latency', [0.0, 0.005, 0.008, 0.012, 0.02, 0.03])
+def test_with_a_desired_start_a_stop_taken_late_brakes_the_command_smoothly(latency):
+    # JTC takes a message at its first update after it arrives and runs from its own last
+    # command: a stop made from that command at the run's time, unstamped, set it back by
+    # however late it was taken (a review: 1.04 rad/s to 0.31, or -0.73 and -1.77 rad/s with
+    # 8 and 20 ms of delivery); stamped, it brakes from where the command is when taken,
+    # its speed changing by no more than the stop's own deceleration over the delay
+    settings = RunSettings(velocity_scaling=0.7, jtc_start='desired')
+    loop = Disentangler(ARM, Planner(), Q1, max_paths=5, seed=0, goal_tolerance=0.04)
+    clock = [0.0]
+    run = Run(ARM, loop, settings, clock=lambda: clock[0])
+    jtc = TrajectoryController(0.01, 'desired')
+    run.start(0.0, Q0)
+    run.on_plan(loop.next_path(Q0))
+    deliveries = [(0.0, a.command) for a in run.actions if isinstance(a, Send)]
+    commands, stop_at = [], 0.403
+    for k in range(80):
+        t = k * 0.01
+        for when, command in [d for d in deliveries if d[0] <= t]:
+            jtc.receive(command)
+            deliveries.remove((when, command))
+        commands.append(jtc.update(t, Q0 if k == 0 else commands[-1]))
+        if t < stop_at <= t + 0.01:
+            clock[0] = stop_at
+            run.actions.clear()
+            run.stop()
+            deliveries += [(stop_at + latency, a.command) for a in run.actions
+                           if isinstance(a, Send)]
+    speed = np.diff(np.array(commands)[:, 0]) / 0.01             # A1, the joint that moves most
+    k = int(stop_at / 0.01)
+    assert speed[k - 1] > 0.9                                     # it was moving fast
+    assert speed[k:].min() > -1e-3                                # never back
+    assert np.abs(np.diff(speed[k - 2:])).max() / 0.01 < 25.0     # rad/s^2: braking
 
 
 def test_an_arm_still_running_the_last_command_at_a_new_start_is_no_foreign_motion():

@@ -15,6 +15,7 @@
 
 """Trajectory commands through their ROS message and back: every point, every field."""
 
+from dataclasses import replace
 import math
 
 import numpy as np
@@ -46,6 +47,11 @@ def test_a_command_goes_through_its_message_unchanged_point_by_point():
     assert np.allclose(back.times, times, rtol=0, atol=1e-9)
     assert np.array_equal(back.velocities, velocities, equal_nan=True)
     assert back.accelerations is None or np.isnan(back.accelerations).all()
+    assert back.stamp == 0.0 and msg.header.stamp.sec == 0 == msg.header.stamp.nanosec
+    # a desired start stamps its commands: JTC runs them on its own time line from then
+    stamped = command_from_msg(trajectory_msg(replace(command, stamp=1796369963.125), JOINTS),
+                               JOINTS, arm.lower, arm.upper)
+    assert abs(stamped.stamp - 1796369963.125) < 1e-6
 
 
 def five_points():

@@ -25,7 +25,7 @@ from __future__ import annotations
 
 from array import array
 
-from builtin_interfaces.msg import Duration
+from builtin_interfaces.msg import Duration, Time
 import numpy as np
 from probdis_ros.motion.jtc import TrajectoryCommand
 from probdis_ros.motion.state_check import (  # noqa: F401 (BadJointStateError: re-exported)
@@ -45,6 +45,12 @@ def joint_positions(msg: JointState, joint_names: list[str]) -> np.ndarray:
 def stamp_seconds(msg: JointState | JointTrajectory) -> float:
     """Return a message's header stamp [s] (0 when unstamped)."""
     return msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+
+
+def time_msg(seconds: float) -> Time:
+    """Return a builtin_interfaces Time (a header stamp)."""
+    nanoseconds = round(seconds * 1e9)
+    return Time(sec=nanoseconds // 1_000_000_000, nanosec=nanoseconds % 1_000_000_000)
 
 
 def duration(seconds: float) -> Duration:
@@ -68,6 +74,8 @@ def trajectory_msg(command: TrajectoryCommand, joint_names: list[str]) -> JointT
     """
     msg = JointTrajectory()
     msg.joint_names = list(joint_names)
+    if command.stamp > 0:           # JTC starts it then (a desired start), else when taken
+        msg.header.stamp = time_msg(command.stamp)
     times = np.asarray(command.times, dtype=float).tolist()
     columns = []
     for name in ('positions', 'velocities', 'accelerations'):

@@ -225,6 +225,8 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
         if message.topic == trajectory_topic:
             try:
                 command = command_from_msg(msg, names, arm.lower, arm.upper)
+                if command.stamp > 0:      # on the recording's clock, as the times here
+                    command = replace(command, stamp=command.stamp - t0)
             except ValueError as err:
                 result.problems.append(f'{t:.3f} s: command refused: {err}')
                 continue
