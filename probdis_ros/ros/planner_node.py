@@ -424,7 +424,7 @@ class PlannerNode(Node):
             return 'outside the joint limits'
         if not self.arm.within_limits(goal, tol=-GOAL_INSIDE_LIMITS)[0]:
             return (f'outside the joint limits as KUKA has them (whole degrees): keep it '
-                    f'{GOAL_INSIDE_LIMITS:g} rad inside the URDF\'s')
+                    f'{GOAL_INSIDE_LIMITS:g} rad inside the URDF limits')
         return self.arm.table_problem(goal)
 
     def _run_settings(self, changes: dict | None = None) -> RunSettings:
