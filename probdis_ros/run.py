@@ -174,6 +174,47 @@ class RunSettings:
                             lower=arm.lower, upper=arm.upper)
 
 
+#: [rad/s] JTC's command moves when a joint's speed is above this (a desired start stamps it)
+MOVING_COMMAND = 1e-3
+#: [s] a stamped message ends at least this long after its stamp (a hold at its last point)
+STAMP_HORIZON = 1.0
+
+
+def stamped(command: TrajectoryCommand, now: float,
+            last: tuple[np.ndarray, np.ndarray, np.ndarray] | None) -> TrajectoryCommand:
+    """
+    Return the message of a command made at now from JTC's moving command ``last``: stamped.
+
+    With a desired start JTC starts a message from its own command when it takes it (its next
+    update once built and delivered).  Made from that command at now and unstamped, a
+    *moving* command fell back by however late JTC took it: a review measured A1 at 1.04
+    rad/s going to 0.31 rad/s for a period, and with 8 or 20 ms of delivery to -0.73 or
+    -1.77 (past its limit).  Stamped with now, JTC runs it on its own time line: a stop
+    taken 0-30 ms late changes speed by at most its own deceleration over the delay (0.2
+    rad/s in a period at scaling 0.7).  (A stamp ahead of now made a bump: JTC dates its own
+    point before a message a period early; 30 ms ahead, 0.9 rad/s in a period.)  JTC drops a
+    stamped message whose last point is due before it arrives (:func:`ends_in_the_past`): a
+    short stop taken late would leave the old command running, so a stamped message ends
+    ``STAMP_HORIZON`` after its stamp at least, holding its last point.  A command at rest
+    (the measured start, or JTC's command holding) goes unstamped: taken whenever, it starts
+    where JTC is, and a late one does not jump into its own middle.
+    """
+    if last is None or np.abs(last[1]).max() <= MOVING_COMMAND:
+        return command
+    command = replace(command, stamp=now)
+    if command.times[-1] >= STAMP_HORIZON:
+        return command
+    n = command.positions.shape[1]
+
+    def held(rows: np.ndarray | None) -> np.ndarray | None:
+        return None if rows is None else np.vstack([rows, np.zeros((1, n))])
+
+    return replace(command, times=np.append(command.times, STAMP_HORIZON),
+                   positions=np.vstack([command.positions, command.positions[-1:]]),
+                   velocities=held(command.velocities),
+                   accelerations=held(command.accelerations))
+
+
 @dataclass(frozen=True)
 class Send:
     """Send this command to the controller."""
@@ -589,22 +630,11 @@ class Run:
         at ``planned_at``, where the motion was planned from (the clock moves on while it is
         timed: the command must start where the motion does).
         """
-        command = self._message(motion)
         now = self._time() if planned_at is None else planned_at
-        if self._desired_start:
-            # stamped: JTC runs it on its own time line, from where the command is when it
-            # takes it (its next update once built and delivered).  Unstamped, JTC started it
-            # when taken from its own command, which had moved on: a moving command fell
-            # back by however late it was taken (a review measured A1 at 1.04 rad/s going to
-            # 0.31 rad/s for a period, and with 8 or 20 ms of delivery to -0.73 or -1.77,
-            # past its limit); stamped, a stop taken 0-30 ms late changes speed by at most
-            # 0.2 rad/s in a period (its own deceleration meanwhile).  A stamp ahead of
-            # now would not do: JTC dates its own point before a message a period early,
-            # and blending from it made a bump (0.9 rad/s with 30 ms ahead)
-            command = replace(command, stamp=now)
+        last = self._last_command(now)
+        command = stamped(self._message(motion), now, last)
         self._emit(Send(command, path, now))
         self.motion = motion
-        last = self._last_command(now)
         self.trajectory = taken_trajectory(command, now, self.measured, self.measured_velocity,
                                            last, self.period)
         self.sent_at = now
@@ -730,7 +760,7 @@ class Run:
         most ``EXTRAPOLATE`` s (a blocked arm barely moves).  When the joint
         states have stopped arriving (older than state_timeout), from where the running
         command has taken the arm by now (the command motion_delay ago): never from a stale
-        position.  With a desired start it is stamped (:meth:`_send`).
+        position.  With a desired start it may be stamped (:func:`stamped`).
         """
         now = self._time()
         age = max(now - self.measured_at, 0.0)
@@ -744,7 +774,7 @@ class Run:
             except (RuntimeError, ValueError):      # brake it below at least
                 release = None
         if release is not None:
-            command = replace(self._message(release), stamp=now)
+            command = stamped(self._message(release), now, last)
             self._emit(Send(command, None, now))
             self.trajectory = taken_trajectory(command, now, last[0], last[1], last,
                                                self.period)
@@ -775,8 +805,7 @@ class Run:
             command = self._message(stop(q, v, a, self.limits))
         except (RuntimeError, ValueError):      # never left without a command to stop
             command = self._message(stop(q, 0 * q, 0 * q, self.limits))   # hold there
-        if last is not None:
-            command = replace(command, stamp=now)
+        command = stamped(command, now, last)
         self._emit(Send(command, None, now))
         # what the arm runs from now on: a later stop without fresh states starts from it
         self.trajectory = taken_trajectory(command, now, q, v, last, self.period)

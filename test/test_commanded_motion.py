@@ -39,7 +39,14 @@ from probdis_ros.motion.jtc import JtcTrajectory, TrajectoryController
 from probdis_ros.motion.profiles import from_state
 from probdis_ros.motion.state_check import BadJointStateError, StateCheck
 from probdis_ros.planning.disentangle import Disentangler
-from probdis_ros.run import Learned, MAX_VELOCITY_SCALING, Run, RunSettings, Send
+from probdis_ros.run import (
+    Learned,
+    MAX_VELOCITY_SCALING,
+    Run,
+    RunSettings,
+    Send,
+    STAMP_HORIZON,
+)
 import pytest
 
 ARM = iiwa_arm()
@@ -387,6 +394,37 @@ def test_with_a_desired_start_a_stop_taken_late_brakes_the_command_smoothly(late
     assert speed[k - 1] > 0.9                                     # it was moving fast
     assert speed[k:].min() > -1e-3                                # never back
     assert np.abs(np.diff(speed[k - 2:])).max() / 0.01 < 25.0     # rad/s^2: braking
+
+
+@pytest.mark.parametrize('latency', [0.2, 0.5])
+def test_with_a_desired_start_a_stop_taken_very_late_is_still_taken(latency):
+    # JTC drops a stamped message whose last point is due before it arrives: a short stop
+    # (0.16 s from 1 rad/s) delivered late would leave the path running to its end, so a
+    # stamped message ends STAMP_HORIZON after its stamp at least
+    settings = RunSettings(velocity_scaling=0.7, jtc_start='desired')
+    loop = Disentangler(ARM, Planner(), Q1, max_paths=5, seed=0, goal_tolerance=0.04)
+    clock = [0.0]
+    run = Run(ARM, loop, settings, clock=lambda: clock[0])
+    jtc = TrajectoryController(0.01, 'desired')
+    run.start(0.0, Q0)
+    run.on_plan(loop.next_path(Q0))
+    deliveries = [(0.0, a.command) for a in run.actions if isinstance(a, Send)]
+    commands, stop_at = [], 0.403
+    for k in range(300):
+        t = k * 0.01
+        for when, command in [d for d in deliveries if d[0] <= t]:
+            jtc.receive(command)
+            deliveries.remove((when, command))
+        commands.append(jtc.update(t, Q0 if k == 0 else commands[-1]))
+        if t < stop_at <= t + 0.01:
+            clock[0] = stop_at
+            run.actions.clear()
+            run.stop()
+            stops = [a.command for a in run.actions if isinstance(a, Send)]
+            assert stops and stops[-1].stamp == stop_at and stops[-1].times[-1] >= STAMP_HORIZON
+            deliveries += [(stop_at + latency, command) for command in stops]
+    assert np.abs(commands[-1] - Q1).max() > 0.05        # stopped short of the path's end
+    assert np.abs(commands[-1] - commands[-2]).max() < 1e-9
 
 
 def test_an_arm_still_running_the_last_command_at_a_new_start_is_no_foreign_motion():

@@ -183,10 +183,23 @@ def test_the_learned_box_search_sees_only_its_stops_and_gets_out_where_the_simul
         assert line_is_free(world, x0, lines[-1]) == (bound.learned_box_paths > 0)
         again, _ = learned_box_lines(world, bound.hole_radius, seed)
         assert np.array_equal(np.array(again), np.array(lines))      # the seed's stream
-        if box is not None:
-            # the box it learnt holds the start and puts its first stops on its faces
+        if box is not None:                                  # the box it learnt holds the start
             local = (x0 - box.center) @ box.axes.T
             assert np.all(np.abs(local) < box.half)
+
+
+def test_the_learned_box_search_can_learn_a_box_from_its_stops_alone():
+    # seed 3: its lines meet the sides as they were laid out to, and the box comes out right
+    # (within the world's parameters' rounding); it does not always (seeds 0 and 4: a side
+    # 1.4-4.5 cm off; RESULTS.md counts how often)
+    world = random_family_world('plate_hole', 3)
+    p = world.params
+    _, box = learned_box_lines(world, p['hole_radius'], 3)
+    match = np.abs(box.axes @ np.array(p['axes']).T)
+    order = match.argmax(axis=1)
+    assert sorted(order) == [0, 1, 2] and match.max(axis=1).min() > math.cos(math.radians(1))
+    assert np.linalg.norm(box.center - np.array(p['center'])) < 0.002
+    assert np.abs(box.half - np.array(p['half_size'])[order]).max() < 0.002
 
 
 def brute_force(shares, paths):

@@ -121,6 +121,20 @@ def test_the_controller_commands_one_period_ahead_and_a_new_message_replaces_the
     assert jtc.update(5.0, np.array([0.0])) == pytest.approx([-0.7])       # holds the end
 
 
+def test_a_stamped_message_that_ends_before_it_is_taken_is_dropped_as_jtc_does():
+    # JTC's validation: a stamped message whose last point is due before now "ends in the
+    # past" and is refused; the running command goes on
+    jtc = TrajectoryController(period=0.01)
+    jtc.update(0.0, np.array([0.0]))
+    jtc.receive(one_joint([1.0], [1.0]))
+    jtc.update(1.0, np.array([0.0]), np.zeros(1))
+    jtc.receive(one_joint([0.1], [0.2], stamp=1.2))            # due at 1.3, taken at 1.5
+    assert jtc.update(1.5, np.array([0.5])) == pytest.approx([0.51])   # the old one runs on
+    jtc.receive(one_joint([1.0], [0.2], stamp=1.2))            # due at 2.2: taken
+    assert jtc.update(1.6, np.array([0.5])) != pytest.approx([0.61])
+    assert jtc.update(3.0, np.array([0.2])) == pytest.approx([0.2])
+
+
 def test_refuses_times_that_do_not_increase_and_shapes_that_do_not_match():
     with pytest.raises(ValueError, match='increasing'):
         one_joint([1.0, 1.0], [0.0, 1.0])

@@ -579,7 +579,7 @@ def test_start_is_refused_without_a_controller_and_a_run_stops_when_it_goes(ros,
         controller.close()
     wait_for(lambda: finished(ros), 5, 'the run to stop')
     # the graph check (every 0.5 s) or the detector (the still arm never took the path: a
-    # gap past three times the ceiling) stops it first, whichever comes first; nothing learned
+    # gap past its ceiling) stops it first, whichever comes first; nothing learned
     assert ros.status['state'] == 'stopped', ros.status
     assert 'controller is gone' in ros.status['message'] or \
         'nothing executes the commands' in ros.status['message'], ros.status

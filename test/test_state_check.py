@@ -116,6 +116,9 @@ def test_velocities_within_the_limits_or_none_are_taken():
     assert np.array_equal(v, fast)
     _, v = check.check(1.01, NAMES, Q, [])
     assert v is None
+    # the lbr stack's hardware interface reports NaN velocities until its second FRI sample
+    _, v = check.check(1.02, NAMES, Q, [np.nan] * 7)
+    assert v is None and check.refused == 0
 
 
 def test_a_state_stamped_ahead_of_its_stream_is_refused():

@@ -52,16 +52,17 @@ hole is.  Per world, three such bounds and one search that could be run:
     search of a box it must first learn from its own blocks (it knows that the trap is a
     box and the hole's radius; it sees where each straight line from the start stopped).
     A block tells one number, how far its line went; a box takes nine (turn, six sides):
-    :func:`learned_box_paths` spends ten lines to pin it down (three close together give
-    a side's plane, the lines along that side's normal both ways, two across it the turn,
-    four along the remaining axes the other sides), each of them a test of the hole as
-    well, then searches the box it learnt.  What it costs to learn what ``centre_first``
-    is given.
+    :func:`learned_box_lines` spends ten to thirteen lines on it (three close together for
+    a side's plane, the lines along that side's normal both ways, two across it for the
+    turn, then the axes of the box that fits the stops best, both ways, where no line went
+    yet), each of them a test of the hole as well, then searches the box it learnt.  One
+    search that learns what ``centre_first`` is given, and not always right (its lines
+    need not meet the sides as laid out).
 """
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 import itertools
 import math
 import warnings
@@ -278,6 +279,7 @@ class LearnedBox:
     axes: np.ndarray
     center: np.ndarray
     half: np.ndarray
+    lines: int = 0          # the lines it took to learn it
 
 
 #: [m] a stop this near a face of a box lies on it (the walls are exact planes)
@@ -367,7 +369,7 @@ def learned_box_lines(world: FamilyWorld, radius: float, seed: int, most: int = 
         for u in (axis, -axis):
             if max(float(u @ line) for line in lines) < math.cos(AXIS_TRIED) and out(u):
                 return lines, None
-    box = fit_box(np.array(stops), start)
+    box = replace(fit_box(np.array(stops), start), lines=len(lines))
     axes = box.axes
     for side, u, v in centre_first_points(box.half, radius, most):
         k = side // 2

@@ -249,6 +249,16 @@ def taken_trajectory(command: TrajectoryCommand, now: float, q_measured: np.ndar
     return JtcTrajectory(command, q, v, now, a, -period)
 
 
+def ends_in_the_past(command: TrajectoryCommand, now: float) -> bool:
+    """
+    Tell whether JTC refuses a message at now: stamped, its last point is due before now.
+
+    JTC's validation drops such a message ("ends in the past") and runs on with what it had:
+    a stamped stop taken late would leave the running command to its end.
+    """
+    return command.stamp > 0 and command.stamp + float(command.times[-1]) < now
+
+
 class TrajectoryController:
     """
     JTC's update loop: takes the newest message at its next update, commands one period ahead.
@@ -275,11 +285,11 @@ class TrajectoryController:
     def update(self, now: float, q_measured: np.ndarray,
                v_measured: np.ndarray | None = None) -> np.ndarray:
         """Return the position command of the update at time now."""
-        if self._pending is not None:
+        pending, self._pending = self._pending, None
+        if pending is not None and not ends_in_the_past(pending, now):
             last = self.last if self.start == 'desired' else None
-            self.trajectory = taken_trajectory(self._pending, now, q_measured, v_measured,
-                                               last, self.period)
-            self._pending = None
+            self.trajectory = taken_trajectory(pending, now, q_measured, v_measured, last,
+                                               self.period)
         if self.trajectory is None:
             if self._hold is None:
                 self._hold = np.asarray(q_measured, dtype=float).copy()

@@ -157,15 +157,16 @@ class StateCheck:
 
     def _velocities(self, names: Sequence[str], velocities: Sequence[float]
                     ) -> np.ndarray | None:
-        """Return the state's velocities (None if it has none); refuse impossible ones, NaN too."""
+        """Return the state's velocities (None if it has none); refuse impossible ones."""
         if len(velocities) and len(velocities) != len(names):
             raise BadJointStateError(f'{len(names)} names but {len(velocities)} velocities')
         v = values_by_name(names, velocities, self.joint_names)
         if v is None:
-            if len(velocities) and not np.all(np.isfinite(np.asarray(velocities, dtype=float))):
-                # dropped, a stop would take the arm for at rest and hold it dead
+            finite = np.isfinite(np.asarray(velocities, dtype=float))
+            if finite.any() and not finite.all():
+                # a glitch: dropped, a stop would take the arm for at rest and hold it dead
                 raise BadJointStateError(f'non-finite velocities {list(velocities)}')
-            return None
+            return None     # none, or none yet (lbr_ros2_control's first state: all NaN)
         j = _worst(np.abs(v) - JUMP_SPEED * self.velocity_limits)
         if j is not None:
             raise BadJointStateError(
