@@ -34,34 +34,49 @@ from probdis_ros.sim.families import random_family_world
 SIGMAS = (0.0, 0.005, 0.01, 0.02)
 
 
+def box_is_right(box, params: dict, place: float = 0.005, turn: float = 2.0) -> bool:
+    """Tell whether a learnt box is the world's within place [m] and turn [degrees]."""
+    match = np.abs(box.axes @ np.array(params['axes']).T)
+    order = match.argmax(axis=1)
+    if sorted(order) != [0, 1, 2] or match.max(axis=1).min() < np.cos(np.radians(turn)):
+        return False
+    return bool(np.linalg.norm(box.center - np.array(params['center'])) < place and
+                np.abs(box.half - np.array(params['half_size'])[order]).max() < place)
+
+
 def main(first: int, count: int) -> None:
     """Print success within 5, 10, 20 paths and mean paths per stop error."""
     exact = hole_search.first_stop
     worlds = [(seed, random_family_world('plate_hole', seed))
               for seed in range(first, first + count)]
     print(f'plate_hole seeds {first}-{first + count - 1}, the learned-box search')
-    print('| stop error per axis [m] | within 5 | within 10 | within 20 | mean paths |')
-    print('| --- | --- | --- | --- | --- |')
+    print('| stop error per axis [m] | within 5 | within 10 | within 20 | mean paths (when out '
+          'within 20) | box learnt | right (5 mm, 2 deg) | lines to learn it |')
+    print('| --- | --- | --- | --- | --- | --- | --- | --- |')
     for sigma in SIGMAS:
-        taken = []
+        taken, learnt, right, spent = [], 0, 0, []
         for seed, world in worlds:
             rng = np.random.default_rng([seed, 7])
 
-            def seen(world, start, direction, length=1.0, rng=rng):
+            def seen(world, start, direction, length=1.0, rng=rng, sigma=sigma):
                 stop = exact(world, start, direction, length)
                 return None if stop is None else stop + rng.normal(scale=sigma, size=3)
 
             hole_search.first_stop = seen
             hole_search.ON_FACE = max(0.002, 2 * sigma)
-            lines, _ = hole_search.learned_box_lines(world, world.params['hole_radius'], seed)
+            lines, box = hole_search.learned_box_lines(world, world.params['hole_radius'], seed)
             start = world.arm.fk(world.start).positions[0]
             out = exact(world, start, lines[-1]) is None
             taken.append(len(lines) if out else 10**6)
+            if box is not None:
+                learnt += 1
+                spent.append(box.lines)
+                right += box_is_right(box, world.params)
         taken = np.array(taken)
         within = [np.mean(taken <= n) for n in (5, 10, 20)]
         mean = taken[taken <= 20].mean() if (taken <= 20).any() else float('nan')
-        print(f'| {sigma} | {within[0]:.2f} | {within[1]:.2f} | {within[2]:.2f} | {mean:.1f} |',
-              flush=True)
+        print(f'| {sigma} | {within[0]:.2f} | {within[1]:.2f} | {within[2]:.2f} | {mean:.1f} | '
+              f'{learnt} | {right} | {min(spent)}-{max(spent)} |', flush=True)
     hole_search.first_stop = exact
 
 
