@@ -391,7 +391,9 @@ class BlockDetector:
         """
         Tell whether the arm, still until now, has begun to move later than the command said.
 
-        If so, the command's start moves on to match (the controller took it late).
+        If so, the command's start moves on to match (the controller took it late), unless
+        the command is stamped (a desired start's from a moving command): JTC then runs it
+        from its stamp whenever it takes it.
         """
         if not self._first or len(self._history) < 2:
             return False
@@ -399,6 +401,8 @@ class BlockDetector:
         if moved <= allowance:
             return False
         self.started = True
+        if getattr(getattr(self.path, 'command', None), 'stamp', 0.0) > 0:
+            return False        # stamped: JTC runs it on its own time line, late or not
         # when the command would have moved the arm as far as it has moved now
         first = np.mean(self._first, axis=0)
         steps = np.arange(0.0, max(t, 0.0) + 0.005, 0.005)
