@@ -361,13 +361,15 @@ def test_a_stop_from_states_without_velocities_brakes_the_moving_arm(scaling):
     assert braking.duration > 0.05
 
 
-@pytest.mark.parametrize('latency', [0.0, 0.005, 0.008, 0.012, 0.02, 0.03])
-def test_with_a_desired_start_a_stop_taken_late_brakes_the_command_smoothly(latency):
-    # JTC takes a message at its first update after it arrives and runs from its own last
-    # command: a stop made from that command at the run's time, unstamped, set it back by
-    # however late it was taken (a review: 1.04 rad/s to 0.31, or -0.73 and -1.77 rad/s with
-    # 8 and 20 ms of delivery); stamped, it brakes from where the command is when taken,
-    # its speed changing by no more than the stop's own deceleration over the delay
+STOP_AT = 0.403     # [s] into a path at scaling 0.7, between two of JTC's updates
+
+
+def desired_stop_taken_late(latency: float, ticks: int) -> tuple[np.ndarray, list]:
+    """
+    Run a path with a desired start under the JTC model, stopped at STOP_AT, delivered late.
+
+    Returns JTC's position commands, one per period, and the stop's messages.
+    """
     settings = RunSettings(velocity_scaling=0.7, jtc_start='desired')
     loop = Disentangler(ARM, Planner(), Q1, max_paths=5, seed=0, goal_tolerance=0.04)
     clock = [0.0]
@@ -376,21 +378,32 @@ def test_with_a_desired_start_a_stop_taken_late_brakes_the_command_smoothly(late
     run.start(0.0, Q0)
     run.on_plan(loop.next_path(Q0))
     deliveries = [(0.0, a.command) for a in run.actions if isinstance(a, Send)]
-    commands, stop_at = [], 0.403
-    for k in range(80):
+    commands, stops = [], []
+    for k in range(ticks):
         t = k * 0.01
         for when, command in [d for d in deliveries if d[0] <= t]:
             jtc.receive(command)
             deliveries.remove((when, command))
         commands.append(jtc.update(t, Q0 if k == 0 else commands[-1]))
-        if t < stop_at <= t + 0.01:
-            clock[0] = stop_at
+        if t < STOP_AT <= t + 0.01:
+            clock[0] = STOP_AT
             run.actions.clear()
             run.stop()
-            deliveries += [(stop_at + latency, a.command) for a in run.actions
-                           if isinstance(a, Send)]
-    speed = np.diff(np.array(commands)[:, 0]) / 0.01             # A1, the joint that moves most
-    k = int(stop_at / 0.01)
+            stops = [a.command for a in run.actions if isinstance(a, Send)]
+            deliveries += [(STOP_AT + latency, command) for command in stops]
+    return np.array(commands), stops
+
+
+@pytest.mark.parametrize('latency', [0.0, 0.005, 0.008, 0.012, 0.02, 0.03])
+def test_with_a_desired_start_a_stop_taken_late_brakes_the_command_smoothly(latency):
+    # JTC takes a message at its first update after it arrives and runs from its own last
+    # command: a stop made from that command at the run's time, unstamped, set it back by
+    # however late it was taken (a review: 1.04 rad/s to 0.31, or -0.73 and -1.77 rad/s with
+    # 8 and 20 ms of delivery); stamped, it brakes from where the command is when taken,
+    # its speed changing by no more than the stop's own deceleration over the delay
+    commands, _ = desired_stop_taken_late(latency, 80)
+    speed = np.diff(commands[:, 0]) / 0.01                        # A1, the joint that moves most
+    k = int(STOP_AT / 0.01)
     assert speed[k - 1] > 0.9                                     # it was moving fast
     assert speed[k:].min() > -1e-3                                # never back
     assert np.abs(np.diff(speed[k - 2:])).max() / 0.01 < 25.0     # rad/s^2: braking
@@ -401,28 +414,8 @@ def test_with_a_desired_start_a_stop_taken_very_late_is_still_taken(latency):
     # JTC drops a stamped message whose last point is due before it arrives: a short stop
     # (0.16 s from 1 rad/s) delivered late would leave the path running to its end, so a
     # stamped message ends STAMP_HORIZON after its stamp at least
-    settings = RunSettings(velocity_scaling=0.7, jtc_start='desired')
-    loop = Disentangler(ARM, Planner(), Q1, max_paths=5, seed=0, goal_tolerance=0.04)
-    clock = [0.0]
-    run = Run(ARM, loop, settings, clock=lambda: clock[0])
-    jtc = TrajectoryController(0.01, 'desired')
-    run.start(0.0, Q0)
-    run.on_plan(loop.next_path(Q0))
-    deliveries = [(0.0, a.command) for a in run.actions if isinstance(a, Send)]
-    commands, stop_at = [], 0.403
-    for k in range(300):
-        t = k * 0.01
-        for when, command in [d for d in deliveries if d[0] <= t]:
-            jtc.receive(command)
-            deliveries.remove((when, command))
-        commands.append(jtc.update(t, Q0 if k == 0 else commands[-1]))
-        if t < stop_at <= t + 0.01:
-            clock[0] = stop_at
-            run.actions.clear()
-            run.stop()
-            stops = [a.command for a in run.actions if isinstance(a, Send)]
-            assert stops and stops[-1].stamp == stop_at and stops[-1].times[-1] >= STAMP_HORIZON
-            deliveries += [(stop_at + latency, command) for command in stops]
+    commands, stops = desired_stop_taken_late(latency, 300)
+    assert stops and stops[-1].stamp == STOP_AT and stops[-1].times[-1] >= STAMP_HORIZON
     assert np.abs(commands[-1] - Q1).max() > 0.05        # stopped short of the path's end
     assert np.abs(commands[-1] - commands[-2]).max() < 1e-9
 
