@@ -221,6 +221,14 @@ def centre_first_points(half: np.ndarray, radius: float, most: int = MOST_POINTS
     return order[:most]
 
 
+def side_point(center: np.ndarray, axes: np.ndarray, half: np.ndarray, side: int, a: float,
+               b: float) -> np.ndarray:
+    """Return the point (a, b) of a box's side (0-5: +x, -x, ... of its axes, rows of axes)."""
+    k = side // 2
+    i, j = [m for m in range(3) if m != k]
+    return center + (1 - 2 * (side % 2)) * half[k] * axes[k] + a * axes[i] + b * axes[j]
+
+
 def centre_first_paths(world: FamilyWorld, discs: list[Obstacle]) -> int:
     """
     Return the paths the centre-first search takes to get out of a world (0: not within 60).
@@ -235,9 +243,7 @@ def centre_first_paths(world: FamilyWorld, discs: list[Obstacle]) -> int:
     for n, (side, a, b) in enumerate(centre_first_points(half, radius), start=1):
         if side != plate:
             continue
-        k = side // 2
-        i, j = [m for m in range(3) if m != k]
-        point = center + (1 - 2 * (side % 2)) * half[k] * axes[k] + a * axes[i] + b * axes[j]
+        point = side_point(center, axes, half, side, a, b)
         if open_in_plate(point[None], discs)[0]:
             return n
     return 0
@@ -370,13 +376,8 @@ def learned_box_lines(world: FamilyWorld, radius: float, seed: int, most: int = 
             if max(float(u @ line) for line in lines) < math.cos(AXIS_TRIED) and out(u):
                 return lines, None
     box = replace(fit_box(np.array(stops), start), lines=len(lines))
-    axes = box.axes
     for side, u, v in centre_first_points(box.half, radius, most):
-        k = side // 2
-        i, j = [m for m in range(3) if m != k]
-        point = (box.center + (1 - 2 * (side % 2)) * box.half[k] * axes[k] + u * axes[i]
-                 + v * axes[j])
-        if out(point - start):
+        if out(side_point(box.center, box.axes, box.half, side, u, v) - start):
             break
     return lines, box
 
