@@ -279,6 +279,20 @@ def test_nan_joint_states_are_reported_and_skipped(tmp_path):
     assert any('non-finite' in p for p in result.problems)
 
 
+def test_a_state_with_some_velocities_nan_is_refused_as_the_live_planner_refuses_it(tmp_path):
+    # a glitch: the live gate refuses it (a stop would take the arm for at rest); the replay
+    # passed the gate no velocities and took it
+    messages, _, _ = simulated_run()
+    stamp, _, fields = [m for m in messages if m[1] == JS and m[0] < 1.5e9][-1]
+    glitch = dict(fields, velocity=[float('nan')] + [0.0] * 6)
+    glitch['header'] = {'stamp': {'sec': stamp // 10**9, 'nanosec': stamp % 10**9 + 1000},
+                        'frame_id': ''}
+    write_bag(tmp_path / 'bag', [*messages, (stamp + 1000, JS, glitch)], 9, StoragePlugin.MCAP)
+    result = replay(tmp_path / 'bag')
+    assert len(result.blocks) == 1
+    assert any('non-finite velocities' in p for p in result.problems), result.problems
+
+
 TIME_DEF = 'int32 sec\nuint32 nanosec\n'
 HEADER_DEF = 'builtin_interfaces/Time stamp\nstring frame_id\n'
 SEP = '=' * 80 + '\n'

@@ -366,6 +366,41 @@ def test_stop_during_motion_decelerates_to_rest_within_the_limits(ros, tmp_path)
     assert ros.status['state'] == 'stopped'
 
 
+@pytest.mark.parametrize('offset', [3.0, -3.0])
+def test_a_stamped_stop_reaches_an_arm_whose_clock_is_off(ros, tmp_path, offset):
+    # a desired start stamps a command made while JTC's command moves, and JTC runs it on
+    # the clock that stamps the arm's joint states: 3 s ahead, a stop stamped on this
+    # node's clock was dropped as past (the arm ran its path on, 0.54 rad past the stop's
+    # end); 3 s behind, JTC bridged the 3 s to it with a spline that swung 0.66 rad beyond
+    node = planner(ros, tmp_path, interpolate_from_desired_state=True,
+                   controller_node='/mock_iiwa')
+    arm = mock(ros, free_scenario(tmp_path), interpolate_from_desired_state=True,
+               clock_offset=offset)
+    # the mock's arm counts from its start, and a stamp before that reads as none
+    wait_for(lambda: arm.robot.time > abs(offset) + 1.0, 20, "the mock's clock")
+    wait_for(lambda: ros.call('start').success, 20, 'start')
+    wait_for(lambda: ros.status.get('state') == 'executing', 20, 'motion')
+    time.sleep(0.3)
+    count = len(ros.trajectories)
+    assert ros.call('stop').success
+    wait_for(lambda: ros.status.get('state') == 'stopped', 2, 'the stop')
+    stop = ros.trajectories[count][1]
+    stamp = stop.header.stamp.sec + stop.header.stamp.nanosec * 1e-9
+    assert abs(stamp - (arm.epoch + arm.robot.time)) < 0.5       # on the arm's clock
+    assert abs(node.state_check.clock_offset + offset) < 0.1
+    points = np.array([p.positions for p in stop.points])
+    assert np.abs(points[-1] - GOAL).max() > 0.05          # the path would have gone on
+    time.sleep(0.1)                     # the arm's lag behind its command: 0.09 rad here
+    course = []
+    for _ in range(100):                # 2 s: the stop (1 s) and after it
+        course.append(np.array(arm.q))
+        time.sleep(0.02)
+    # the arm goes where the stop goes, and nowhere else
+    off = [np.abs(points - q).max(axis=1).min() for q in course]
+    assert max(off) < 0.03
+    np.testing.assert_allclose(arm.q, points[-1], atol=0.01)
+
+
 def test_stop_during_planning_sends_no_path(ros, tmp_path):
     planner(ros, tmp_path)
     steady_states(ros)

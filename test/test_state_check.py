@@ -132,3 +132,16 @@ def test_a_state_stamped_ahead_of_its_stream_is_refused():
     with pytest.raises(BadJointStateError, match='ahead of its stream'):
         check.check(1.1, NAMES, far, stamp=53.1)
     check.check(1.11, NAMES, Q, stamp=50.11)      # the arm's own stream goes on
+
+
+def test_the_clock_offset_is_the_quickest_delivery_and_zero_until_a_stamped_state():
+    # the arm's clock 3 s behind the receiver's, deliveries of 1-4 ms: a message stamped for
+    # the arm's controller moves by the offset (early by the quickest delivery, 1 ms)
+    check = gate()
+    check.check(10.0, NAMES, Q)                   # unstamped: nothing to tell the offset by
+    assert check.clock_offset == 0.0
+    check = gate()
+    for k, delivery in enumerate([0.004, 0.001, 0.003]):
+        check.check(10.0 + 0.01 * k + delivery, NAMES, Q, stamp=7.0 + 0.01 * k)
+    assert check.clock_offset == pytest.approx(3.001)
+    assert check.measured_at(10.033, 7.03) == pytest.approx(10.031)

@@ -186,6 +186,19 @@ class StateCheck:
             return min(now, stamp + self.quickest)
         return now
 
+    @property
+    def clock_offset(self) -> float:
+        """
+        Return the receiver's clock less the clock that stamps the states [s].
+
+        The stream's quickest delivery (what :meth:`measured_at` adds to a stamp): the two
+        clocks' offset plus the shortest delivery, a millisecond or less.  A message stamped
+        for the arm's controller, which runs on the clock that stamps its joint states, is
+        stamped with this node's time less it.  0 before a stamped state was heard, and on
+        simulated time (the states' stamps are the clock's time).
+        """
+        return self.quickest if np.isfinite(self.quickest) else 0.0
+
     def _check_source(self, now: float, stamp: float, sequence: int,
                       clock: float | None) -> None:
         """Refuse a state from a second publisher, or a stale one."""

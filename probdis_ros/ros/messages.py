@@ -96,11 +96,6 @@ def trajectory_msg(command: TrajectoryCommand, joint_names: list[str]) -> JointT
     return msg
 
 
-def joint_velocities(msg: JointState, joint_names: list[str]) -> np.ndarray | None:
-    """Return the velocities of joint_names from msg, None where it carries none usable."""
-    return values_by_name(msg.name, msg.velocity, joint_names)
-
-
 def command_from_msg(msg: JointTrajectory, joint_names: list[str], lower: np.ndarray,
                      upper: np.ndarray) -> TrajectoryCommand:
     """

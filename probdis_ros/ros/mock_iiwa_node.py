@@ -107,6 +107,10 @@ class MockIiwa(Node):
         p('sim_time', False, _describe('run on simulated time and publish /clock'))
         p('real_time_factor', 5.0, _describe('with sim_time: speed over the wall clock '
                                              '(at most); 0: as fast as possible', 0.0, 1000.0))
+        p('clock_offset', 0.0, _describe(
+            "the arm's clock less the wall clock [s]: the clock its controller and joint "
+            'states run on, as on a second machine whose clock is not synchronised',
+            -1e6, 1e6))
         p('seed', 0, ParameterDescriptor(description='noise stream', read_only=True))
         p('joint_states_topic', '/lbr/joint_states', _describe('sensor_msgs/JointState out'))
         p('trajectory_topic', '/lbr/joint_trajectory_controller/joint_trajectory',
@@ -125,8 +129,9 @@ class MockIiwa(Node):
         self.robot, self.description = build_robot(value('engine'), world, settings, physics)
         self.sim_time = bool(value('sim_time'))
         self.factor = float(value('real_time_factor'))
-        # simulated time starts at the wall clock, so stamps and bags read as real dates
-        self.epoch = time.time()
+        # simulated time starts at the wall clock (its arm's: clock_offset), so stamps and
+        # bags read as real dates
+        self.epoch = time.time() + value('clock_offset')
         self.wall_start = time.monotonic()
         self.driver_down = False        # the command guard stopped the driver
         self.pub = self.create_publisher(JointState, value('joint_states_topic'),

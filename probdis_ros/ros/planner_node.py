@@ -41,7 +41,7 @@ from __future__ import annotations
 from collections import deque
 from concurrent.futures import Future, ThreadPoolExecutor
 from concurrent.futures import TimeoutError as FutureTimeout
-from dataclasses import asdict
+from dataclasses import asdict, replace
 import json
 import math
 import os
@@ -118,6 +118,8 @@ CLOCK_STALL = 2.0
 #: [s] how long a node going down waits for the controller to confirm its stop (reliable DDS
 #: confirms on the writer's heartbeat, every 3 s by default)
 HALT_WAIT = 3.5
+#: [s] a clock offset to the arm's beyond this is said (once) when a command is stamped
+CLOCK_OFFSET_SAID = 0.05
 
 
 def _float(text: str, low: float, high: float) -> ParameterDescriptor:
@@ -786,7 +788,7 @@ class PlannerNode(Node):
             settings = self._run_settings()
             command = rest_command(self.arm, settings.limits(self.arm), self.measured,
                                    self.measured_velocity)
-            self.traj_pub.publish(trajectory_msg(command, self.joint_names))
+            self.traj_pub.publish(self._trajectory_msg(command))
             self._sent_command(self._now(), command)
         response.success, response.message = True, (
             'no run active; decelerating to rest' if fresh else
@@ -818,6 +820,27 @@ class PlannerNode(Node):
 
     # -- the run: events into Run, its actions out ------------------------------------
 
+    def _trajectory_msg(self, command) -> JointTrajectory:
+        """
+        Return a command's message; a stamped one (a desired start's) on the arm's clock.
+
+        JTC runs a stamped message from its stamp on the controller manager's clock, the
+        clock that stamps the arm's joint states, while the run stamps with this node's
+        time: on two machines whose clocks disagree by more than a stamped message's
+        horizon (1 s), a stop would be dropped as past, or waited for as future.  The state
+        check knows the offset (the quickest delivery of the joint states), so the stamp is
+        moved by it: the same instant on the arm's clock, early by the shortest delivery.
+        """
+        if command.stamp > 0:
+            offset = self.state_check.clock_offset
+            if abs(offset) > CLOCK_OFFSET_SAID:
+                self.get_logger().warning(
+                    f"the arm's clock reads {-offset:+.3f} s from this node's (by its joint "
+                    f"states' stamps): stamped commands are moved onto the arm's clock "
+                    f'(synchronise the two clocks)', once=True)
+            command = replace(command, stamp=command.stamp - offset)
+        return trajectory_msg(command, self.joint_names)
+
     @property
     def active(self) -> bool:
         """Tell whether a disentangling run is in progress."""
@@ -829,7 +852,7 @@ class PlannerNode(Node):
         while run is not None and run.actions:
             action = run.actions.pop(0)
             if isinstance(action, Send):
-                self.traj_pub.publish(trajectory_msg(action.command, self.joint_names))
+                self.traj_pub.publish(self._trajectory_msg(action.command))
                 self._sent_command(action.at, action.command)
                 if action.path is not None:
                     self._publish_markers(action.path)

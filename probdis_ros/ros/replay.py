@@ -46,7 +46,6 @@ from probdis_ros.ros.bag_source import Bag, BagError
 from probdis_ros.ros.messages import (
     BadJointStateError,
     command_from_msg,
-    joint_velocities,
     stamp_seconds,
 )
 
@@ -225,8 +224,8 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
         if message.topic == trajectory_topic:
             try:
                 command = command_from_msg(msg, names, arm.lower, arm.upper)
-                if command.stamp > 0:      # on the recording's clock, as the times here
-                    command = replace(command, stamp=command.stamp - t0)
+                if command.stamp > 0:      # on the arm's clock: moved onto the recording's
+                    command = replace(command, stamp=command.stamp + states.clock_offset - t0)
             except ValueError as err:
                 result.problems.append(f'{t:.3f} s: command refused: {err}')
                 continue
@@ -260,12 +259,12 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
         # the live planner's gate, and its dating: by stamp on the recording's clock
         received, stamp = t + t0, stamp_seconds(msg)
         try:
-            q, _ = states.check(received, msg.name, msg.position, (), stamp)
+            q, v = states.check(received, msg.name, msg.position, msg.velocity, stamp)
         except BadJointStateError as err:
             result.problems.append(f'{t:.3f} s: joint state refused: {err}')
             continue
         t = states.measured_at(received, stamp) - t0
-        measured, measured_velocity = q, joint_velocities(msg, names)
+        measured, measured_velocity = q, v
         if early is not None:
             sent, command = early
             early = None
