@@ -388,7 +388,7 @@ class Run:
             self.following = bool(np.abs(q - self.measured).sum() <= self.settings.detection.d_dist
                                   and (velocity is None or
                                        np.abs(v - velocity).sum() <= FOLLOWING_SPEED))
-            if velocity is None and self.following:
+            if velocity is None and self.following and not self._held():
                 # a state without velocities: the arm on its command moves as it says (a
                 # stop or a path from it taken at rest would hold a moving arm dead)
                 self.measured_velocity = v
@@ -403,6 +403,11 @@ class Run:
         detector, self.detector = self.detector, None
         self.rest_at = self.measured.copy()
         self.pressed = verdict is Verdict.BLOCKED
+        if self._held():
+            # held where it was blocked, at rest whatever its command says (a block its torque
+            # showed within d_dist of the command: the retreat ran on into the block by the
+            # command's braking distance, 0.15 rad at scaling 0.7)
+            self.measured_velocity = velocity
         # a compliant arm stopped while pressed into something springs back or slides by up
         # to the gap it pressed with (seen on the physics mock: 0.17 rad after a blocked
         # retreat): that settling is no motion of another driver

@@ -22,7 +22,7 @@ runs (nothing learned); an arm that moves while it should rest, a second publish
 stale states stop a run without learning.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 import re
 
 import numpy as np
@@ -359,6 +359,37 @@ def test_a_stop_from_states_without_velocities_brakes_the_moving_arm(scaling):
     first = braking.sample(0.01)[1]
     assert np.abs(first - moving).max() / 0.01 < 10.0       # rad/s^2: braking, not a wall
     assert braking.duration > 0.05
+
+
+def test_a_block_seen_by_its_torque_on_states_without_velocities_takes_the_arm_as_held():
+    # a driver that sends no velocities, the torque ceiling on: a block is seen within
+    # d_dist of the command, where the arm counts as following it and moving as it says;
+    # the retreat then started from the command's speed and ran on forward into what held
+    # the arm by its braking distance
+    from probdis_ros.motion.detector import gravity_model
+
+    loop = Disentangler(ARM, Planner(), Q1, max_paths=5, seed=0, goal_tolerance=0.04)
+    settings = RunSettings(velocity_scaling=0.7, detection=replace(
+        SETTINGS.detection, torque_ceiling=20.0))
+    run = Run(ARM, loop, settings, clock=lambda: run._now)
+    run.start(0.0, Q0)
+    run.on_plan(loop.next_path(Q0))
+    jtc, gravity = run.trajectory, gravity_model(0.0, (0.0, 0.0, 0.0))
+    delay = settings.detection.motion_delay
+    blocked_at = 0.5 * jtc.duration
+    t = 0.0
+    while run.phase.value == 'executing' and t < jtc.duration:
+        t += 0.01
+        q = jtc.sample(min(t, blocked_at) - delay)[0]
+        push = np.array([0.0, 30.0, 0, 0, 0, 0, 0]) if t >= blocked_at else np.zeros(7)
+        run.on_joint_state(t, q, None, gravity(q) + push)      # positions and efforts only
+    assert run.phase.value == 'retreating' and t < blocked_at + 0.02   # seen at once
+    held = jtc.sample(blocked_at - delay)[0]
+    forward = jtc.sample(blocked_at)[0] - held
+    retreat = [a.command for a in run.actions if isinstance(a, Send)][-1]
+    ahead = (retreat.positions - held) @ forward / np.linalg.norm(forward)
+    assert np.abs(jtc.sample(blocked_at - delay)[1]).max() > 0.3      # the command moved
+    assert ahead.max() < 1e-3, f'the retreat ran {ahead.max():.4f} rad on into the block'
 
 
 STOP_AT = 0.403     # [s] into a path at scaling 0.7, between two of JTC's updates
