@@ -811,8 +811,11 @@ def cmd_demo(args: argparse.Namespace) -> int:
     _positive(args.timeout, '--timeout')      # before the nodes start
     if args.plot:
         _check_output(args.plot, '--plot')
+    if not math.isfinite(args.arm_clock_offset):
+        raise UsageError('--arm-clock-offset must be a finite number of seconds')
     result = run_demo(world, args.timeout, quiet=args.json, engine=args.engine,
-                      sim_time=args.sim_time, jtc_start=args.jtc_start)
+                      sim_time=args.sim_time, jtc_start=args.jtc_start,
+                      extra_mock_args=('-p', f'clock_offset:={args.arm_clock_offset!r}'))
     summary = {k: result[k] for k in ('success', 'paths', 'failures', 'replan_latency_s')}
     if args.json:
         _print_json(summary)
@@ -1081,6 +1084,9 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument('--plot', metavar='OUT.png',
                       help='draw the scene with the flange path and the blocks of the run')
     demo.add_argument('--timeout', type=float, default=300.0, help='seconds for the run')
+    demo.add_argument('--arm-clock-offset', type=float, default=0.0, metavar='S',
+                      help="the mock arm's clock less this machine's [s]: a driver on a "
+                      'computer whose clock is not synchronised (default 0)')
     _jtc_start_argument(demo)
     demo.add_argument('--json', action='store_true',
                       help='print {"success", "paths", "failures", "replan_latency_s"}')

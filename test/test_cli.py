@@ -223,6 +223,8 @@ def test_nan_negative_and_empty_values_are_refused_naming_the_flag(probdis, tmp_
              '--seconds must be a positive number, got -1'),
             (('demo', '--timeout', '0'), 'demo', '--timeout must be a positive number, got 0'),
             (('demo', '--timeout', '-5'), 'demo', '--timeout must be a positive'),
+            (('demo', '--arm-clock-offset', 'inf'), 'demo',
+             '--arm-clock-offset must be a finite number'),
             (('experiment', 'sweep', '--plan-time', 'nan', '--out', str(tmp_path / 's')),
              'experiment sweep', '--plan-time must be a positive number, got nan'),
             (('experiment', 'sweep', '--methods', ',', '--out', str(tmp_path / 's')),
