@@ -97,6 +97,17 @@ def finished(ros):
     return ros.status.get('state') in FINISHED
 
 
+def stop_while_moving(ros) -> list:
+    """Start a run, call ~/stop 0.3 s into its motion; return the commands sent from then."""
+    wait_for(lambda: ros.call('start').success, 20, 'start')
+    wait_for(lambda: ros.status.get('state') == 'executing', 20, 'motion')
+    time.sleep(0.3)
+    count = len(ros.trajectories)
+    assert ros.call('stop').success
+    wait_for(lambda: ros.status.get('state') == 'stopped', 2, 'the stop')
+    return ros.trajectories[count:]
+
+
 def test_start_is_refused_without_joint_states(ros, tmp_path):
     planner(ros, tmp_path)
     response = ros.call('start')
@@ -340,13 +351,7 @@ def test_a_full_run_against_the_physics_mock_learns_and_persists_failures(ros, t
 def test_stop_during_motion_decelerates_to_rest_within_the_limits(ros, tmp_path):
     planner(ros, tmp_path)
     arm = mock(ros, free_scenario(tmp_path))
-    wait_for(lambda: ros.call('start').success, 20, 'start')
-    wait_for(lambda: ros.status.get('state') == 'executing', 20, 'motion')
-    time.sleep(0.3)
-    count = len(ros.trajectories)
-    assert ros.call('stop').success
-    wait_for(lambda: ros.status.get('state') == 'stopped', 2, 'the stop')
-    stops = ros.trajectories[count:]
+    stops = stop_while_moving(ros)
     assert len(stops) == 1, 'one command: the stop'
     points = stops[0][1].points
     times = np.array([p.time_from_start.sec + p.time_from_start.nanosec * 1e-9 for p in points])
@@ -370,21 +375,15 @@ def test_stop_during_motion_decelerates_to_rest_within_the_limits(ros, tmp_path)
 def test_a_stamped_stop_reaches_an_arm_whose_clock_is_off(ros, tmp_path, offset):
     # a desired start stamps a command made while JTC's command moves, and JTC runs it on
     # the clock that stamps the arm's joint states: 3 s ahead, a stop stamped on this
-    # node's clock was dropped as past (the arm ran its path on, 0.54 rad past the stop's
-    # end); 3 s behind, JTC bridged the 3 s to it with a spline that swung 0.66 rad beyond
+    # node's clock was dropped as past (the arm ran its path on, 0.68 rad off the stop's
+    # course); 3 s behind, JTC bridged the 3 s to it with a spline that swung 0.47 rad off
     node = planner(ros, tmp_path, interpolate_from_desired_state=True,
                    controller_node='/mock_iiwa')
     arm = mock(ros, free_scenario(tmp_path), interpolate_from_desired_state=True,
                clock_offset=offset)
     # the mock's arm counts from its start, and a stamp before that reads as none
     wait_for(lambda: arm.robot.time > abs(offset) + 1.0, 20, "the mock's clock")
-    wait_for(lambda: ros.call('start').success, 20, 'start')
-    wait_for(lambda: ros.status.get('state') == 'executing', 20, 'motion')
-    time.sleep(0.3)
-    count = len(ros.trajectories)
-    assert ros.call('stop').success
-    wait_for(lambda: ros.status.get('state') == 'stopped', 2, 'the stop')
-    stop = ros.trajectories[count][1]
+    stop = stop_while_moving(ros)[0][1]
     stamp = stop.header.stamp.sec + stop.header.stamp.nanosec * 1e-9
     assert abs(stamp - (arm.epoch + arm.robot.time)) < 0.5       # on the arm's clock
     assert abs(node.state_check.clock_offset + offset) < 0.1
