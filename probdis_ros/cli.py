@@ -811,8 +811,9 @@ def cmd_demo(args: argparse.Namespace) -> int:
     _positive(args.timeout, '--timeout')      # before the nodes start
     if args.plot:
         _check_output(args.plot, '--plot')
-    if not math.isfinite(args.arm_clock_offset):
-        raise UsageError('--arm-clock-offset must be a finite number of seconds')
+    if not abs(args.arm_clock_offset) <= 1e6:
+        raise UsageError(f'--arm-clock-offset must be within +-1e6 s, got '
+                         f'{args.arm_clock_offset:g}')
     result = run_demo(world, args.timeout, quiet=args.json, engine=args.engine,
                       sim_time=args.sim_time, jtc_start=args.jtc_start,
                       extra_mock_args=('-p', f'clock_offset:={args.arm_clock_offset!r}'))

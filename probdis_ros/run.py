@@ -54,6 +54,7 @@ before the next planner call; the host drops the result of the one under way).
 
 from __future__ import annotations
 
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from enum import Enum
@@ -61,7 +62,7 @@ import threading
 
 import numpy as np
 from probdis_ros.model.arms import Arm
-from probdis_ros.motion.detector import BlockDetector, DetectorSettings, Verdict
+from probdis_ros.motion.detector import BlockDetector, DetectorSettings, slope_of, Verdict
 from probdis_ros.motion.jtc import (
     CONTROLLER_RATE,
     DEFAULT_JTC_START,
@@ -96,6 +97,9 @@ EXTRAPOLATE = 0.05
 #: An arm whose L1 velocity differs from its command's by more than this [rad/s] does not
 #: follow it (with its position within d_dist).
 FOLLOWING_SPEED = 0.5
+#: [s] on states without velocities, a blocked arm's velocity is its positions' slope over
+#: this long (least squares: 2 states at 100 Hz, 16 at 1 kHz)
+VELOCITY_WINDOW = 0.015
 #: An arm at rest between commands that goes further than this x d_dist (L1) both from
 #: where it came to rest and from where the last command holds it is moved by something else
 #: (after a block, plus the gap it pressed with: it may settle by that much).
@@ -327,6 +331,7 @@ class Run:
         self.rest_at: np.ndarray | None = None           # where the arm came to rest
         self.rest_slack = 0.0      # how far it may still settle from there [rad L1]
         self.pressed = False                             # the last motion ended blocked
+        self._recent: deque[tuple[float, np.ndarray]] = deque()     # (time, measured)
         self.latencies: list[float] = []
         self.outcome = ''
         self.message = 'ready'
@@ -382,13 +387,16 @@ class Run:
         self.measured = np.clip(np.asarray(config, dtype=float), self.arm.lower, self.arm.upper)
         self.measured_at = now
         self.measured_velocity = velocity
+        self._recent.append((now, self.measured))
+        while now - self._recent[0][0] > VELOCITY_WINDOW + 1e-9:
+            self._recent.popleft()
         if self.trajectory is not None:     # on its command: where and how fast it says
             t = now - self.trajectory.taken_at - self.settings.detection.motion_delay
             q, v, _ = self.trajectory.sample(t)
             self.following = bool(np.abs(q - self.measured).sum() <= self.settings.detection.d_dist
                                   and (velocity is None or
                                        np.abs(v - velocity).sum() <= FOLLOWING_SPEED))
-            if velocity is None and self.following and not self._held():
+            if velocity is None and self.following:
                 # a state without velocities: the arm on its command moves as it says (a
                 # stop or a path from it taken at rest would hold a moving arm dead)
                 self.measured_velocity = v
@@ -403,11 +411,13 @@ class Run:
         detector, self.detector = self.detector, None
         self.rest_at = self.measured.copy()
         self.pressed = verdict is Verdict.BLOCKED
-        if self._held():
-            # held where it was blocked, at rest whatever its command says (a block its torque
-            # showed within d_dist of the command: the retreat ran on into the block by the
-            # command's braking distance, 0.15 rad at scaling 0.7)
-            self.measured_velocity = velocity
+        if self.pressed and velocity is None:
+            # blocked: held, or still moving (a torque ceiling tripped by a soft contact), which
+            # the command's velocity does not tell (a block its torque showed within d_dist of
+            # the command: the retreat ran on into it by the command's braking distance, 0.15
+            # rad at scaling 0.7); the arm's recent positions do
+            times, positions = zip(*self._recent)
+            self.measured_velocity = slope_of(np.array(times), np.array(positions))
         # a compliant arm stopped while pressed into something springs back or slides by up
         # to the gap it pressed with (seen on the physics mock: 0.17 rad after a blocked
         # retreat): that settling is no motion of another driver

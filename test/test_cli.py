@@ -224,7 +224,7 @@ def test_nan_negative_and_empty_values_are_refused_naming_the_flag(probdis, tmp_
             (('demo', '--timeout', '0'), 'demo', '--timeout must be a positive number, got 0'),
             (('demo', '--timeout', '-5'), 'demo', '--timeout must be a positive'),
             (('demo', '--arm-clock-offset', 'inf'), 'demo',
-             '--arm-clock-offset must be a finite number'),
+             '--arm-clock-offset must be within +-1e6 s, got inf'),
             (('experiment', 'sweep', '--plan-time', 'nan', '--out', str(tmp_path / 's')),
              'experiment sweep', '--plan-time must be a positive number, got nan'),
             (('experiment', 'sweep', '--methods', ',', '--out', str(tmp_path / 's')),

@@ -133,10 +133,20 @@ def motion_over(times: np.ndarray, positions: np.ndarray) -> tuple[float, float]
         return 0.0, 0.0
     t = times - times.mean()
     spread = float(np.sum(t * t))
-    slope = (t @ (positions - positions.mean(axis=0))) / spread
     span = times[-1] - times[0]
     error = noise_of(positions) * span / np.sqrt(spread)
-    return float(np.abs(slope).sum() * span), NOISE_SIGMAS * float(error.sum())
+    return (float(np.abs(slope_of(times, positions)).sum() * span),
+            NOISE_SIGMAS * float(error.sum()))
+
+
+def slope_of(times: np.ndarray, positions: np.ndarray) -> np.ndarray:
+    """Return each joint's least-squares slope over samples (times, positions (N, n))."""
+    times = np.asarray(times, dtype=float)
+    positions = np.asarray(positions, dtype=float)
+    if len(times) < 2 or times[-1] <= times[0]:
+        return np.zeros(positions.shape[1:])
+    t = times - times.mean()
+    return (t @ (positions - positions.mean(axis=0))) / float(np.sum(t * t))
 
 
 class Verdict(str, Enum):

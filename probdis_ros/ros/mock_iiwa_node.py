@@ -58,7 +58,7 @@ from probdis_ros.ros import MOCK_NODE
 from probdis_ros.ros.markers import scene_markers
 from probdis_ros.ros.messages import command_from_msg
 from probdis_ros.ros.node_main import run_node
-from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
+from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParametersResult
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, qos_profile_sensor_data, QoSProfile
 from rosgraph_msgs.msg import Clock
@@ -107,10 +107,11 @@ class MockIiwa(Node):
         p('sim_time', False, _describe('run on simulated time and publish /clock'))
         p('real_time_factor', 5.0, _describe('with sim_time: speed over the wall clock '
                                              '(at most); 0: as fast as possible', 0.0, 1000.0))
-        p('clock_offset', 0.0, _describe(
-            "the arm's clock less the wall clock [s]: the clock its controller and joint "
-            'states run on, as on a second machine whose clock is not synchronised',
-            -1e6, 1e6))
+        clock = _describe("the arm's clock less the wall clock [s]: the clock its controller "
+                          'and joint states run on, as on a second machine whose clock is not '
+                          'synchronised; set while running, the clock steps', -1e6, 1e6)
+        clock.read_only = False
+        p('clock_offset', 0.0, clock)
         p('seed', 0, ParameterDescriptor(description='noise stream', read_only=True))
         p('joint_states_topic', '/lbr/joint_states', _describe('sensor_msgs/JointState out'))
         p('trajectory_topic', '/lbr/joint_trajectory_controller/joint_trajectory',
@@ -132,6 +133,7 @@ class MockIiwa(Node):
         # simulated time starts at the wall clock (its arm's: clock_offset), so stamps and
         # bags read as real dates
         self.epoch = time.time() + value('clock_offset')
+        self.add_on_set_parameters_callback(self._on_parameters)
         self.wall_start = time.monotonic()
         self.driver_down = False        # the command guard stopped the driver
         self.pub = self.create_publisher(JointState, value('joint_states_topic'),
@@ -153,6 +155,13 @@ class MockIiwa(Node):
         self.create_timer(tick, self._tick)
         self.get_logger().info(f'mock iiwa ({value("engine")}): {self.description}' +
                                (' on simulated time' if self.sim_time else ''))
+
+    def _on_parameters(self, params: list) -> SetParametersResult:
+        """Step the arm's clock by a new clock_offset (an NTP step on the arm's computer)."""
+        for param in params:
+            if param.name == 'clock_offset':
+                self.epoch += param.value - self.get_parameter('clock_offset').value
+        return SetParametersResult(successful=True)
 
     @property
     def q(self) -> np.ndarray:

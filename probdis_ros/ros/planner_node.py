@@ -831,9 +831,20 @@ class PlannerNode(Node):
         check knows the offset (the quickest delivery of the joint states), so the stamp is
         moved by it: the same instant on the arm's clock, early by the shortest delivery.
         """
+        if command.stamp > 0 and self.state_check.refused_within(self._now(), REFUSAL_HOLD):
+            # the states just refused may be a clock that stepped: with the old offset a
+            # stamped stop could land in JTC's past and be dropped, the path running on
+            self.get_logger().warning('joint states refused: this command goes unstamped, '
+                                      'taken when it arrives')
+            command = replace(command, stamp=0.0)
         if command.stamp > 0:
             offset = self.state_check.clock_offset
-            if abs(offset) > CLOCK_OFFSET_SAID:
+            if self.state_check.last_stamp <= 0:
+                self.get_logger().warning(
+                    "the arm's joint states carry no stamps: stamped commands are stamped on "
+                    "this node's clock, which JTC's must agree with (synchronise the two "
+                    'clocks)', once=True)
+            elif abs(offset) > CLOCK_OFFSET_SAID:
                 self.get_logger().warning(
                     f"the arm's clock reads {-offset:+.3f} s from this node's (by its joint "
                     f"states' stamps): stamped commands are moved onto the arm's clock "
