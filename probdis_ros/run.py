@@ -754,6 +754,8 @@ class Run:
         self.outcome = state.value
         self.plan_pending = False
         self.pending_path = None
+        if self.detector is not None:   # held now only if its command began pressed in, not back
+            self.pressed = self.detector.pressed
         self.detector = None
         self.message = message
         self.phase = Phase(state.value)

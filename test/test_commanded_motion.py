@@ -411,6 +411,37 @@ def test_a_block_seen_by_its_torque_on_states_without_velocities_brakes_from_the
     assert np.abs(braking.sample(0.01)[1] - moving).max() / 0.01 < 10.0     # rad/s^2
 
 
+def test_a_stop_during_a_free_retreat_after_a_block_brakes_ahead_not_back_to_the_arm():
+    # desired start: after a block the retreat first brings JTC's command back to the held
+    # arm, then runs free; a ~/stop then took the arm as still held (the block's flag was
+    # left standing when the stop dropped the retreat's detector) and brought the command
+    # back to the arm, which lags it: the stop ended where the arm was, a reversal of a
+    # moving arm (0.24 rad behind where braking ends), not a stop
+    loop = Disentangler(ARM, Planner(), Q1, max_paths=5, seed=0, goal_tolerance=0.04)
+    settings = RunSettings(velocity_scaling=0.7, jtc_start='desired')
+    run = Run(ARM, loop, settings, clock=lambda: run._now)
+    run.start(0.0, Q0)
+    run.on_plan(loop.next_path(Q0))
+    jtc, delay = run.trajectory, settings.detection.motion_delay
+    blocked_at = 0.5 * jtc.duration
+    t = 0.0
+    while run.phase.value == 'executing' and t < 10.0:
+        t += 0.01
+        q, v, _ = jtc.sample(min(t, blocked_at) - delay)
+        run.on_joint_state(t, q, v if t < blocked_at else 0 * v)
+    retreat = run.trajectory
+    for _ in range(60):                  # free again: the arm follows the retreat
+        t += 0.01
+        q, v, _ = retreat.sample(t - retreat.taken_at - delay)
+        run.on_joint_state(t, q, v)
+    assert not run.detector.pressed and np.abs(v).max() > 0.5
+    run.actions.clear()
+    run.stop()
+    stop = [a.command for a in run.actions if isinstance(a, Send)][-1]
+    ahead = (stop.positions[-1] - q) @ v / np.linalg.norm(v)
+    assert ahead > 0.1, f'the stop ends {ahead:.3f} rad along the motion of the arm'
+
+
 STOP_AT = 0.403     # [s] into a path at scaling 0.7, between two of JTC's updates
 
 
