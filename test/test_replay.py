@@ -149,6 +149,25 @@ def test_replay_finds_the_block_in_both_storage_formats(tmp_path, version, plugi
     assert t_stop + 0.3 - 0.02 <= block.t <= t_stop + 0.3 + 0.02
 
 
+def test_a_stamped_command_from_an_arm_whose_clock_is_off_is_replayed_on_the_bags_clock(
+        tmp_path):
+    # the planner stamps a desired start's command on the arm's clock (its joint states'),
+    # 3 s ahead of its own here; the replay moves the stamp back by the states' offset, and
+    # finds the block where it finds it for the same command unstamped
+    messages, _, t_stop = simulated_run()
+
+    def stamped(fields, seconds):
+        sec = int(seconds // 1)
+        return dict(fields, header={'stamp': {'sec': sec, 'nanosec': int((seconds - sec) * 1e9)},
+                                    'frame_id': ''})
+
+    off = [(ns, topic, stamped(fields, ns * 1e-9 + 3.0)) for ns, topic, fields in messages]
+    write_bag(tmp_path / 'bag', off, *FORMATS[0])
+    result = replay(tmp_path / 'bag')
+    assert result.paths == 1 and len(result.blocks) == 1, result.problems
+    assert t_stop + 0.3 - 0.02 <= result.blocks[0].t <= t_stop + 0.3 + 0.02
+
+
 def test_joint_states_held_up_in_delivery_are_dated_by_their_stamps(tmp_path):
     # a free move recorded by `ros2 bag record` on a busy machine: half a second of joint
     # states held up and written at once; the live planner dates them by their stamps
