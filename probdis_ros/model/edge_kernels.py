@@ -48,7 +48,7 @@ from probdis_ros.model.kinematics import (
 AT_FAILURE = 1e-6
 #: [m] along an edge (not at its start), a point this near a failure point is on it, where
 #: cos alpha is -1 (alpha = pi, ratio 1), as in the paper at the failure itself
-#: (_failure_into); nearer than this the direction to the failure is rounding's, and an
+#: (_chunk_probabilities); nearer than this the direction to the failure is rounding's, and an
 #: edge that ends on a failure's configuration got any ratio from 0 to 1
 AT_FAILURE_POINT = 1e-9
 ALONG_NEAR2 = AT_FAILURE_POINT ** 2
@@ -121,7 +121,11 @@ def _chunk_probabilities(pos, rot, count, f_points, f_dirs, f_rots, c_fail, use_
     that the compiler vectorises: the poses are first copied to one contiguous row per
     coordinate (rows 0-11 of soa), the arccos is fast_math's, and the numpy error model drops the
     division checks that would otherwise keep the loop scalar.  (Bounds per point cost more
-    in scalar square roots and divisions than the vector arithmetic they save.)
+    in scalar square roots and divisions than the vector arithmetic they save.)  The rows
+    are indexed in place (``soa[k, i]``), never taken as views, and no function with array
+    arguments is inlined in the loops: numba counts a view's or an inlined argument's
+    references with atomic increments and decrements, which cost a chunk about as much as
+    the arithmetic of a failure (1.26 against 0.82 us a chunk at 19 failures).
 
     Exact pruning per chunk: an upper bound of each failure's probability over the chunk is
     compared with the least maximum found so far among the chunk's points; a failure whose
@@ -133,9 +137,9 @@ def _chunk_probabilities(pos, rot, count, f_points, f_dirs, f_rots, c_fail, use_
     bounds of all failures are computed in one vectorised loop (with cheap upper bounds of
     asin and of the rotation angle, ``ASIN_CUBE``).  The failure of the highest bound goes
     first, so that the maximum rises early, then the others in order, each only if its
-    bound is still above the least maximum (one loop: one inlined copy of the evaluation
-    to compile; sorting the others by bound made no plan faster), and the orientation
-    factor of its bound spares most of them the factor (:func:`_failure_into`).  The result
+    bound is still above the least maximum (one loop: one copy of the evaluation to
+    compile; sorting the others by bound made no plan faster), and the orientation
+    factor of its bound spares most of them the factor (the evaluation loop).  The result
     is the same number, bit for bit, as evaluating every failure: a maximum does not depend
     on the order, nor on values that do not win (``prune`` False evaluates them all, for the
     checks).  ``soa`` is the :func:`workspace` of the map.
@@ -149,8 +153,6 @@ def _chunk_probabilities(pos, rot, count, f_points, f_dirs, f_rots, c_fail, use_
     n_fail = f_points.shape[1]
     pruned = prune and n_fail >= SKIP_FROM and count >= 2
     first = 0
-    bounds = soa[12]
-    factors = soa[14]
     if pruned:
         # the chunk's bounding sphere and every failure's bound, in one loop without
         # branches that the compiler vectorises (the failure arrays hold one row per
@@ -186,23 +188,61 @@ def _chunk_probabilities(pos, rot, count, f_points, f_dirs, f_rots, c_fail, use_
                 # of the kernel's half-angle form (below ANGLE_MARGIN)
                 angle = arccos(min(1.0, max(-1.0, (trace - 1.0) * 0.5)))
                 factor = 1.0 - 0.5 * max(0.0, angle - spread - ANGLE_MARGIN) * INV_PI
-            factors[f] = factor
+            soa[14, f] = factor
             taper = max(0.0, 1.0 - gap * gap * c_fail[1])
-            bounds[f] = ((1.0 + 1e-9) * ratio * factor * (taper * taper)
-                         / (1.0 + c_fail[0] * gap * gap))
+            soa[12, f] = ((1.0 + 1e-9) * ratio * factor * (taper * taper)
+                          / (1.0 + c_fail[0] * gap * gap))
         for f in range(n_fail):
-            if bounds[f] > bounds[first]:
+            if soa[12, f] > soa[12, first]:
                 first = f
     # the failure of the highest bound first, then the others in order, each only while its
     # bound exceeds the least maximum so far (no point starts above 0)
     least = 0.0 if pruned else -1.0
     for slot in range(n_fail):
         f = first if slot == 0 else slot - 1 if slot <= first else slot
-        most = factors[f] if pruned else 1.0
-        if pruned and bounds[f] <= least:
+        most = soa[14, f] if pruned else 1.0
+        if pruned and soa[12, f] <= least:
             continue
-        _failure_into(f, count, soa, f_points, f_dirs, f_rots, c_fail, use_orient, p_out,
-                      near2, at_failure, most)
+        # failure f's probability at each point raises that point's maximum in p_out (written
+        # out here, not an inlined function: its array arguments would cost atomic reference
+        # counts per failure).  With orientation, in two passes: P_COORD first (kept in row
+        # 13); only if P_COORD times ``most``, an upper bound of the orientation factor over
+        # the chunk (the chunk bound's: 1 unpruned), exceeds some point's maximum is the
+        # factor computed, for the whole chunk.  Most failures that pass the chunk's bound
+        # lose already there (on the 400-failure map 5 of 43 per chunk go on, against 20 with
+        # a bound of 1), and the factor is three of the eight square roots and divisions per
+        # point.  The numbers are those of one pass: the same operations on the same values
+        # (a product of non-negative numbers rounds monotonically, so coord * factor <=
+        # coord * most wherever factor <= most).  At the failure itself (d2 <= near2) cos
+        # alpha is at_failure: -1 (alpha = pi, ratio 1) as in the paper, +1 (behind it) for
+        # where a Hard edge starts.
+        fx, fy, fz = f_points[0, f], f_points[1, f], f_points[2, f]
+        ux, uy, uz = f_dirs[0, f], f_dirs[1, f], f_dirs[2, f]
+        higher = 0
+        if not use_orient:
+            for i in range(count):
+                p = _coord_probability(fx - soa[0, i], fy - soa[1, i], fz - soa[2, i], ux, uy,
+                                       uz, c_fail, near2, at_failure)
+                p_out[i] = max(p_out[i], p)
+        else:
+            for i in range(count):
+                p = _coord_probability(fx - soa[0, i], fy - soa[1, i], fz - soa[2, i], ux, uy,
+                                       uz, c_fail, near2, at_failure)
+                soa[13, i] = p
+                higher += 1 if p * most > p_out[i] else 0
+        if higher > 0:
+            # orientation: 1 - 0.5 D_ORIENT from trace(G^T R)
+            g00, g01, g02 = f_rots[0, 0, f], f_rots[0, 1, f], f_rots[0, 2, f]
+            g10, g11, g12 = f_rots[1, 0, f], f_rots[1, 1, f], f_rots[1, 2, f]
+            g20, g21, g22 = f_rots[2, 0, f], f_rots[2, 1, f], f_rots[2, 2, f]
+            for i in range(count):
+                trace = (g00 * soa[3, i] + g01 * soa[4, i] + g02 * soa[5, i]
+                         + g10 * soa[6, i] + g11 * soa[7, i] + g12 * soa[8, i]
+                         + g20 * soa[9, i] + g21 * soa[10, i] + g22 * soa[11, i])
+                half_cos = np.sqrt(min(1.0, max(0.0, (trace + 1.0) * 0.25)))
+                half_cos = 1.0 if half_cos > AT_FAILURE_HALF_COS else half_cos
+                factor = 1.0 - arccos(half_cos) / np.pi
+                p_out[i] = max(p_out[i], soa[13, i] * factor)
         if pruned:
             least = _least(p_out, count)
 
@@ -291,56 +331,6 @@ def _coord_probability(dx, dy, dz, ux, uy, uz, c_fail, near2, at_failure):
     ratio = arccos(min(1.0, max(-1.0, c))) / np.pi
     taper = max(0.0, 1.0 - d2 * c_fail[1])
     return ratio * ratio * ratio * (taper * taper) / (1.0 + c_fail[0] * d2)
-
-
-@numba.njit(cache=True, error_model='numpy', inline='always')
-def _failure_into(f, count, soa, f_points, f_dirs, f_rots, c_fail, use_orient, p_out, near2,
-                  at_failure, most):
-    """
-    Raise each point's maximum in p_out to failure f's probability there.
-
-    With orientation, in two passes: P_COORD first (kept in row 13 of the workspace); only
-    if P_COORD times ``most``, an upper bound of the orientation factor over the chunk (the
-    chunk bound's: 1 unpruned), exceeds some point's maximum is the factor computed, for the
-    whole chunk.  Most failures that pass the chunk's bound lose already there (on the
-    400-failure map 5 of 43 per chunk go on, against 20 with a bound of 1), and the factor
-    is three of the eight square roots and divisions per point.  The numbers are those of
-    one pass: the same operations on the same values (a product of non-negative numbers
-    rounds monotonically, so coord * factor <= coord * most wherever factor <= most).
-    """
-    px, py, pz = soa[0], soa[1], soa[2]
-    coord = soa[13]
-    fx, fy, fz = f_points[0, f], f_points[1, f], f_points[2, f]
-    ux, uy, uz = f_dirs[0, f], f_dirs[1, f], f_dirs[2, f]
-    higher = 0
-    # (at the failure itself, d2 <= near2, cos alpha is at_failure: -1 (alpha = pi, ratio 1)
-    # as in the paper, +1 (behind it) for where a Hard edge starts)
-    if not use_orient:
-        for i in range(count):
-            p = _coord_probability(fx - px[i], fy - py[i], fz - pz[i], ux, uy, uz, c_fail,
-                                   near2, at_failure)
-            p_out[i] = max(p_out[i], p)
-        return
-    for i in range(count):
-        p = _coord_probability(fx - px[i], fy - py[i], fz - pz[i], ux, uy, uz, c_fail, near2,
-                               at_failure)
-        coord[i] = p
-        higher += 1 if p * most > p_out[i] else 0
-    if higher == 0:
-        return
-    # orientation: 1 - 0.5 D_ORIENT from trace(G^T R)
-    r00, r01, r02, r10, r11, r12 = soa[3], soa[4], soa[5], soa[6], soa[7], soa[8]
-    r20, r21, r22 = soa[9], soa[10], soa[11]
-    g00, g01, g02 = f_rots[0, 0, f], f_rots[0, 1, f], f_rots[0, 2, f]
-    g10, g11, g12 = f_rots[1, 0, f], f_rots[1, 1, f], f_rots[1, 2, f]
-    g20, g21, g22 = f_rots[2, 0, f], f_rots[2, 1, f], f_rots[2, 2, f]
-    for i in range(count):
-        trace = (g00 * r00[i] + g01 * r01[i] + g02 * r02[i] + g10 * r10[i] + g11 * r11[i]
-                 + g12 * r12[i] + g20 * r20[i] + g21 * r21[i] + g22 * r22[i])
-        half_cos = np.sqrt(min(1.0, max(0.0, (trace + 1.0) * 0.25)))
-        half_cos = 1.0 if half_cos > AT_FAILURE_HALF_COS else half_cos
-        factor = 1.0 - arccos(half_cos) / np.pi
-        p_out[i] = max(p_out[i], coord[i] * factor)
 
 
 @numba.njit(cache=True, inline='always')
