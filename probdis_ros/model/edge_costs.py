@@ -31,6 +31,7 @@ from probdis_ros.model.edge_kernels import (
     AT_FAILURE,
     cheapest_edge_kernel,
     edge_costs_kernel,
+    padded_count,
 )
 from probdis_ros.model.failure_map import FailureMap
 from probdis_ros.model.path_cost import DEFAULT_DELTA, edge_points, EdgeTerms, P_MAX
@@ -41,6 +42,17 @@ def _padded(values: np.ndarray, dim: int) -> np.ndarray:
     out = np.zeros((len(values), 3))
     out[:, :dim] = np.asarray(values, dtype=float).reshape(-1, dim)
     return out
+
+
+def _columns(values: np.ndarray) -> np.ndarray:
+    """
+    Return ``(F, ...)`` values as contiguous columns ``(..., padded_count(F))``.
+
+    The padding columns repeat the last failure (edge_kernels.padded_count).
+    """
+    columns = np.moveaxis(values, 0, -1)
+    index = np.minimum(np.arange(padded_count(len(values))), len(values) - 1)
+    return np.ascontiguousarray(columns[..., index])
 
 
 def _batch(arm: Arm, sources: np.ndarray, target: np.ndarray, base, limits):
@@ -96,13 +108,16 @@ class EdgeCoster:
         dim = arm.task_space.dim
         # points and directions padded to 3-D (z = 0 in 2-D); one row per coordinate
         # (C-contiguous whatever the map's size: one numba type, so the kernels compile
-        # once, and the kernels' bounds of all failures vectorise)
+        # once, and the kernels' bounds of all failures vectorise), padded to whole vectors
+        # with copies of the last failure that the fourth row of the points flags 0
+        # (edge_kernels.padded_count)
         points, directions, orientations = fmap.arrays()    # the same failures, whole
         rotations = quaternion_to_rotation(orientations).reshape(-1, 3, 3)
+        flags = (np.arange(padded_count(len(points))) < len(points)).astype(float)
         self._failures = (
-            np.ascontiguousarray(_padded(points, dim).T),
-            np.ascontiguousarray(_padded(directions, dim).T),
-            np.ascontiguousarray(rotations.transpose(1, 2, 0)),
+            np.ascontiguousarray(np.vstack([_columns(_padded(points, dim)), flags])),
+            _columns(_padded(directions, dim)),
+            _columns(rotations),
             (self.c_fail, 1.0 / self.terms.reach ** 2), bool(arm.task_space.has_orientation),
             bool(prune))
         self._arm = arm.kernel_params()
