@@ -39,7 +39,7 @@ import numpy as np
 from probdis_ros.model.fast_math import arccos, rotation_angle
 from probdis_ros.model.kinematics import (
     AXIS_CHAIN,
-    axis_chain_pose,
+    axis_chain_frame,
     chain_pose,
     is_identity,
     lowest_height,
@@ -65,16 +65,19 @@ CHUNK = 16
 
 @numba.njit(cache=True, nogil=True)
 def _chunk_poses(cs, sn, cd, sd, b, k0, count, n, kind, joint_params, offsets, bases,
-                 tip_offset, tip_rotation, shapes, floor, pos, rot):
+                 tip_offset, tip_rotation, shapes, floor, pos, rot, soa):
     """
-    Advance the joint cosines/sines count steps; write the poses of points k0+1...
+    Advance the joint cosines/sines count steps; write the poses of points k0+1... to soa.
 
     The last point of the edge (k = n) is recomputed from b so that it lands exactly there.
-    Return the lowest height of the arm at these points (:func:`lowest_height`), or inf
-    without a table (floor -inf).
+    The poses go to rows 0-11 of the :func:`workspace` soa, one row per coordinate: an
+    AXIS_CHAIN's straight there (as :func:`axis_chain_pose` computes them), the others
+    through pos and rot.  Return the lowest height of the arm at these points
+    (:func:`lowest_height`), or inf without a table (floor -inf).
     """
     n_joints = cs.shape[0]
     plain_tip = is_identity(tip_rotation)
+    ox, oy, oz = tip_offset[0], tip_offset[1], tip_offset[2]
     low = np.inf
     for i in range(count):
         k = k0 + i + 1
@@ -102,10 +105,33 @@ def _chunk_poses(cs, sn, cd, sd, b, k0, count, n, kind, joint_params, offsets, b
             low = min(low, lowest_height(cs, sn, kind, joint_params, offsets, bases,
                                          tip_offset, shapes))
         if kind == AXIS_CHAIN:
-            axis_chain_pose(cs, sn, joint_params, offsets, tip_offset, tip_rotation, pos, rot,
-                            i, plain_tip)
+            # axis_chain_pose's pose, written to the rows
+            px, py, pz, r00, r01, r02, r10, r11, r12, r20, r21, r22 = axis_chain_frame(
+                cs, sn, joint_params, offsets)
+            if plain_tip and ox == 0.0 and oy == 0.0:
+                soa[0, i] = px + r02 * oz
+                soa[1, i] = py + r12 * oz
+                soa[2, i] = pz + r22 * oz
+                soa[3, i], soa[4, i], soa[5, i] = r00, r01, r02
+                soa[6, i], soa[7, i], soa[8, i] = r10, r11, r12
+                soa[9, i], soa[10, i], soa[11, i] = r20, r21, r22
+                continue
+            soa[0, i] = px + r00 * ox + r01 * oy + r02 * oz     # tip_pose
+            soa[1, i] = py + r10 * ox + r11 * oy + r12 * oz
+            soa[2, i] = pz + r20 * ox + r21 * oy + r22 * oz
+            for c in range(3):
+                t0, t1, t2 = tip_rotation[0, c], tip_rotation[1, c], tip_rotation[2, c]
+                soa[3 + c, i] = r00 * t0 + r01 * t1 + r02 * t2
+                soa[6 + c, i] = r10 * t0 + r11 * t1 + r12 * t2
+                soa[9 + c, i] = r20 * t0 + r21 * t1 + r22 * t2
             continue
         chain_pose(cs, sn, offsets, bases, tip_offset, tip_rotation, pos, rot, i)
+    if kind != AXIS_CHAIN:
+        for i in range(count):
+            for k in range(3):
+                soa[k, i] = pos[i, k]
+            for k in range(9):
+                soa[3 + k, i] = rot[i, k // 3, k % 3]
     return low
 
 
@@ -113,21 +139,35 @@ def _chunk_poses(cs, sn, cd, sd, b, k0, count, n, kind, joint_params, offsets, b
 SKIP_FROM = 4
 
 
-@numba.njit(cache=True, nogil=True, error_model='numpy')
+@numba.njit(cache=True, nogil=True)
 def _chunk_probabilities(pos, rot, count, f_points, f_dirs, f_rots, c_fail, use_orient, prune,
                          soa, p_out, near2, at_failure):
+    """Write :func:`_rows_probabilities` of the poses pos (count, 3) and rot (count, 3, 3)."""
+    for i in range(count):
+        for k in range(3):
+            soa[k, i] = pos[i, k]
+        for k in range(9):
+            soa[3 + k, i] = rot[i, k // 3, k % 3]
+    _rows_probabilities(count, f_points, f_dirs, f_rots, c_fail, use_orient, prune, soa, p_out,
+                        near2, at_failure)
+
+
+@numba.njit(cache=True, nogil=True, error_model='numpy')
+def _rows_probabilities(count, f_points, f_dirs, f_rots, c_fail, use_orient, prune, soa, p_out,
+                        near2, at_failure):
     """
     Write max over failures of P_COORD * (1 - 0.5 D_ORIENT) for each pose of the chunk.
 
-    Each evaluated (failure, point) pair is exact, in an inner loop over the chunk's points
-    that the compiler vectorises: the poses are first copied to one contiguous row per
-    coordinate (rows 0-11 of soa), the arccos is fast_math's, and the numpy error model drops the
-    division checks that would otherwise keep the loop scalar.  (Bounds per point cost more
-    in scalar square roots and divisions than the vector arithmetic they save.)  The rows
-    are indexed in place (``soa[k, i]``), never taken as views, and no function with array
-    arguments is inlined in the loops: numba counts a view's or an inlined argument's
-    references with atomic increments and decrements, which cost a chunk about as much as
-    the arithmetic of a failure (1.26 against 0.82 us a chunk at 19 failures).
+    The poses are in rows 0-11 of soa, one contiguous row per coordinate
+    (:func:`_chunk_poses`).  Each evaluated (failure, point) pair is exact, in an inner loop
+    over the chunk's points that the compiler vectorises: the arccos is fast_math's, and the
+    numpy error model drops the division checks that would otherwise keep the loop scalar.
+    (Bounds per point cost more in scalar square roots and divisions than the vector
+    arithmetic they save.)  The rows are indexed in place (``soa[k, i]``), never taken as
+    views, and no function with array arguments is inlined in the loops: numba counts a
+    view's or an inlined argument's references with atomic increments and decrements, and
+    the loops with them cost a chunk about as much as the arithmetic of a failure (1.26
+    against 0.82 us a chunk at 19 failures).
 
     Exact pruning per chunk: an upper bound of each failure's probability over the chunk is
     compared with the least maximum found so far among the chunk's points; a failure whose
@@ -148,10 +188,6 @@ def _chunk_probabilities(pos, rot, count, f_points, f_dirs, f_rots, c_fail, use_
     """
     for i in range(count):
         p_out[i] = 0.0
-        for k in range(3):
-            soa[k, i] = pos[i, k]
-        for k in range(9):
-            soa[3 + k, i] = rot[i, k // 3, k % 3]
     n_fail = f_points.shape[1]
     pruned = prune and n_fail >= SKIP_FROM and count >= 2
     first = 0
@@ -419,9 +455,9 @@ def _start_probability(cs, sn, n, kind, joint_params, offsets, bases, tip_offset
     one = np.int64(1)     # not a literal 1: a literal argument would compile a kernel again
     _chunk_poses(cs.copy(), sn.copy(), np.ones(n_joints), np.zeros(n_joints), cs, -one, one, n,
                  kind, joint_params, offsets, bases, tip_offset, tip_rotation, shapes, -np.inf,
-                 pos, rot)
-    _chunk_probabilities(pos, rot, one, f_points, f_dirs, f_rots, c_fail, use_orient, prune,
-                         soa, p_buf, AT_FAILURE ** 2, 1.0)
+                 pos, rot, soa)
+    _rows_probabilities(one, f_points, f_dirs, f_rots, c_fail, use_orient, prune, soa, p_buf,
+                        AT_FAILURE ** 2, 1.0)
     return p_buf[0]
 
 
@@ -481,10 +517,10 @@ def edge_cost_kernel(a, b, limit, delta, length_weight, risk_weight, cap, p_max,
     for k0 in range(0, n, CHUNK):
         count = min(CHUNK, n - k0)
         if _chunk_poses(cs, sn, cd, sd, b, k0, count, n, kind, joint_params, offsets, bases,
-                        tip_offset, tip_rotation, shapes, floor, pos, rot) < ground:
+                        tip_offset, tip_rotation, shapes, floor, pos, rot, soa) < ground:
             return np.inf
-        _chunk_probabilities(pos, rot, count, f_points, f_dirs, f_rots, c_fail, use_orient, prune,
-                             soa, p_buf, ALONG_NEAR2, ALONG_AT_FAILURE)
+        _rows_probabilities(count, f_points, f_dirs, f_rots, c_fail, use_orient, prune, soa,
+                            p_buf, ALONG_NEAR2, ALONG_AT_FAILURE)
         log_survival, highest = _chunk_log_survival(p_buf, count, p_max)
         if highest > cap:
             level = _descend(p_buf, count, cap, level)
@@ -608,11 +644,11 @@ def cheapest_edge_kernel(sources, target, base, toward, delta, length_weight, ri
         count = min(CHUNK, steps[i] - k_done[i])
         if _chunk_poses(cs[i], sn[i], cd[i], sd[i], ends[i], k_done[i], count, steps[i], kind,
                         joint_params, offsets, bases, tip_offset, tip_rotation, shapes, floor,
-                        pos, rot) < ground[i]:
+                        pos, rot, soa) < ground[i]:
             bound[i] = np.inf
             continue
-        _chunk_probabilities(pos, rot, count, f_points, f_dirs, f_rots, c_fail, use_orient, prune,
-                             soa, p_buf, ALONG_NEAR2, ALONG_AT_FAILURE)
+        _rows_probabilities(count, f_points, f_dirs, f_rots, c_fail, use_orient, prune, soa,
+                            p_buf, ALONG_NEAR2, ALONG_AT_FAILURE)
         k_done[i] += count
         log_survival, highest = _chunk_log_survival(p_buf, count, p_max)
         if highest > cap:

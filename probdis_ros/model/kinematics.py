@@ -144,16 +144,12 @@ def chain_pose(cs, sn, offsets, bases, tip_offset, tip_rotation, pos, rot, i):
 
 
 @numba.njit(cache=True, inline='always')
-def axis_chain_pose(cs, sn, codes, offsets, tip_offset, tip_rotation, pos, rot, i,
-                    plain_tip=False, n_used=-1):
+def axis_chain_frame(cs, sn, codes, offsets, n_used=-1):
     """
-    Write pose i of an AXIS_CHAIN arm from its joint cosines and sines.
+    Return the last joint frame of an AXIS_CHAIN, ``(px, py, pz, r00, r01, ..., r22)``.
 
-    Offsets along z alone (the iiwa's) take a third of the arithmetic, and ``plain_tip``
-    (an identity tip rotation, :func:`is_identity`) skips the tip rotation; the products they
-    skip are exact zeros, so the pose is the same to the bit (but for the sign of a zero).
-    ``rot`` None writes the position alone, and then only the first ``n_used`` joints are
-    turned (-1: all; :func:`position_joints` tells how many turns the position depends on).
+    From its joint cosines and sines; the first ``n_used`` joints are turned (-1: all).
+    The arithmetic of :func:`axis_chain_pose` (which moves this frame to the tip).
     """
     px = py = pz = 0.0
     r00, r01, r02 = 1.0, 0.0, 0.0
@@ -188,6 +184,23 @@ def axis_chain_pose(cs, sn, codes, offsets, tip_offset, tip_rotation, pos, rot, 
             r01, r02 = r01 * c + r02 * s, r02 * c - r01 * s
             r11, r12 = r11 * c + r12 * s, r12 * c - r11 * s
             r21, r22 = r21 * c + r22 * s, r22 * c - r21 * s
+    return px, py, pz, r00, r01, r02, r10, r11, r12, r20, r21, r22
+
+
+@numba.njit(cache=True, inline='always')
+def axis_chain_pose(cs, sn, codes, offsets, tip_offset, tip_rotation, pos, rot, i,
+                    plain_tip=False, n_used=-1):
+    """
+    Write pose i of an AXIS_CHAIN arm from its joint cosines and sines.
+
+    Offsets along z alone (the iiwa's) take a third of the arithmetic, and ``plain_tip``
+    (an identity tip rotation, :func:`is_identity`) skips the tip rotation; the products they
+    skip are exact zeros, so the pose is the same to the bit (but for the sign of a zero).
+    ``rot`` None writes the position alone, and then only the first ``n_used`` joints are
+    turned (-1: all; :func:`position_joints` tells how many turns the position depends on).
+    """
+    px, py, pz, r00, r01, r02, r10, r11, r12, r20, r21, r22 = axis_chain_frame(
+        cs, sn, codes, offsets, n_used)
     ox, oy, oz = tip_offset[0], tip_offset[1], tip_offset[2]
     if rot is None:
         pos[i, 0] = px + r00 * ox + r01 * oy + r02 * oz
