@@ -44,6 +44,7 @@ from probdis_ros.model.kinematics import (
     is_identity,
     lowest_height,
     PLANAR,
+    tip_frame,
 )
 
 #: [m] a pose this near a failure point is at it (where an edge may start: _start_probability)
@@ -77,7 +78,6 @@ def _chunk_poses(cs, sn, cd, sd, b, k0, count, n, kind, joint_params, offsets, b
     """
     n_joints = cs.shape[0]
     plain_tip = is_identity(tip_rotation)
-    ox, oy, oz = tip_offset[0], tip_offset[1], tip_offset[2]
     low = np.inf
     for i in range(count):
         k = k0 + i + 1
@@ -108,22 +108,10 @@ def _chunk_poses(cs, sn, cd, sd, b, k0, count, n, kind, joint_params, offsets, b
             # axis_chain_pose's pose, written to the rows
             px, py, pz, r00, r01, r02, r10, r11, r12, r20, r21, r22 = axis_chain_frame(
                 cs, sn, joint_params, offsets)
-            if plain_tip and ox == 0.0 and oy == 0.0:
-                soa[0, i] = px + r02 * oz
-                soa[1, i] = py + r12 * oz
-                soa[2, i] = pz + r22 * oz
-                soa[3, i], soa[4, i], soa[5, i] = r00, r01, r02
-                soa[6, i], soa[7, i], soa[8, i] = r10, r11, r12
-                soa[9, i], soa[10, i], soa[11, i] = r20, r21, r22
-                continue
-            soa[0, i] = px + r00 * ox + r01 * oy + r02 * oz     # tip_pose
-            soa[1, i] = py + r10 * ox + r11 * oy + r12 * oz
-            soa[2, i] = pz + r20 * ox + r21 * oy + r22 * oz
-            for c in range(3):
-                t0, t1, t2 = tip_rotation[0, c], tip_rotation[1, c], tip_rotation[2, c]
-                soa[3 + c, i] = r00 * t0 + r01 * t1 + r02 * t2
-                soa[6 + c, i] = r10 * t0 + r11 * t1 + r12 * t2
-                soa[9 + c, i] = r20 * t0 + r21 * t1 + r22 * t2
+            (soa[0, i], soa[1, i], soa[2, i], soa[3, i], soa[4, i], soa[5, i], soa[6, i],
+             soa[7, i], soa[8, i], soa[9, i], soa[10, i], soa[11, i]) = tip_frame(
+                px, py, pz, r00, r01, r02, r10, r11, r12, r20, r21, r22, tip_offset,
+                tip_rotation, plain_tip)
             continue
         chain_pose(cs, sn, offsets, bases, tip_offset, tip_rotation, pos, rot, i)
     if kind != AXIS_CHAIN:

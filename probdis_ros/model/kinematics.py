@@ -201,21 +201,16 @@ def axis_chain_pose(cs, sn, codes, offsets, tip_offset, tip_rotation, pos, rot, 
     """
     px, py, pz, r00, r01, r02, r10, r11, r12, r20, r21, r22 = axis_chain_frame(
         cs, sn, codes, offsets, n_used)
-    ox, oy, oz = tip_offset[0], tip_offset[1], tip_offset[2]
     if rot is None:
+        ox, oy, oz = tip_offset[0], tip_offset[1], tip_offset[2]
         pos[i, 0] = px + r00 * ox + r01 * oy + r02 * oz
         pos[i, 1] = py + r10 * ox + r11 * oy + r12 * oz
         pos[i, 2] = pz + r20 * ox + r21 * oy + r22 * oz
-    elif plain_tip and ox == 0.0 and oy == 0.0:
-        pos[i, 0] = px + r02 * oz
-        pos[i, 1] = py + r12 * oz
-        pos[i, 2] = pz + r22 * oz
-        rot[i, 0, 0], rot[i, 0, 1], rot[i, 0, 2] = r00, r01, r02
-        rot[i, 1, 0], rot[i, 1, 1], rot[i, 1, 2] = r10, r11, r12
-        rot[i, 2, 0], rot[i, 2, 1], rot[i, 2, 2] = r20, r21, r22
-    else:
-        tip_pose(px, py, pz, r00, r01, r02, r10, r11, r12, r20, r21, r22, tip_offset,
-                 tip_rotation, pos, rot, i)
+        return
+    (pos[i, 0], pos[i, 1], pos[i, 2], rot[i, 0, 0], rot[i, 0, 1], rot[i, 0, 2], rot[i, 1, 0],
+     rot[i, 1, 1], rot[i, 1, 2], rot[i, 2, 0], rot[i, 2, 1], rot[i, 2, 2]) = tip_frame(
+        px, py, pz, r00, r01, r02, r10, r11, r12, r20, r21, r22, tip_offset, tip_rotation,
+        plain_tip)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -340,15 +335,39 @@ def sample_positions_kernel(q, rows, codes, offsets, tip_offset, pos_out):
 def tip_pose(px, py, pz, r00, r01, r02, r10, r11, r12, r20, r21, r22, tip_offset,
              tip_rotation, pos, rot, i):
     """Write pose i: the last joint frame (p, R) moved to the tip by the fixed tip transform."""
+    (pos[i, 0], pos[i, 1], pos[i, 2], rot[i, 0, 0], rot[i, 0, 1], rot[i, 0, 2], rot[i, 1, 0],
+     rot[i, 1, 1], rot[i, 1, 2], rot[i, 2, 0], rot[i, 2, 1], rot[i, 2, 2]) = tip_frame(
+        px, py, pz, r00, r01, r02, r10, r11, r12, r20, r21, r22, tip_offset, tip_rotation,
+        False)
+
+
+@numba.njit(cache=True, inline='always')
+def tip_frame(px, py, pz, r00, r01, r02, r10, r11, r12, r20, r21, r22, tip_offset,
+              tip_rotation, plain_tip):
+    """
+    Return the tip's pose ``(x, y, z, R00, R01, ..., R22)`` from the last joint frame (p, R).
+
+    ``plain_tip`` (an identity tip rotation, :func:`is_identity`) with the offset along z
+    alone (the iiwa's flange) skips products that are exact zeros: the same pose to the bit
+    (but for the sign of a zero).
+    """
     ox, oy, oz = tip_offset[0], tip_offset[1], tip_offset[2]
-    pos[i, 0] = px + r00 * ox + r01 * oy + r02 * oz
-    pos[i, 1] = py + r10 * ox + r11 * oy + r12 * oz
-    pos[i, 2] = pz + r20 * ox + r21 * oy + r22 * oz
-    for c in range(3):
-        t0, t1, t2 = tip_rotation[0, c], tip_rotation[1, c], tip_rotation[2, c]
-        rot[i, 0, c] = r00 * t0 + r01 * t1 + r02 * t2
-        rot[i, 1, c] = r10 * t0 + r11 * t1 + r12 * t2
-        rot[i, 2, c] = r20 * t0 + r21 * t1 + r22 * t2
+    if plain_tip and ox == 0.0 and oy == 0.0:
+        return (px + r02 * oz, py + r12 * oz, pz + r22 * oz,
+                r00, r01, r02, r10, r11, r12, r20, r21, r22)
+    t = tip_rotation
+    return (px + r00 * ox + r01 * oy + r02 * oz,
+            py + r10 * ox + r11 * oy + r12 * oz,
+            pz + r20 * ox + r21 * oy + r22 * oz,
+            r00 * t[0, 0] + r01 * t[1, 0] + r02 * t[2, 0],
+            r00 * t[0, 1] + r01 * t[1, 1] + r02 * t[2, 1],
+            r00 * t[0, 2] + r01 * t[1, 2] + r02 * t[2, 2],
+            r10 * t[0, 0] + r11 * t[1, 0] + r12 * t[2, 0],
+            r10 * t[0, 1] + r11 * t[1, 1] + r12 * t[2, 1],
+            r10 * t[0, 2] + r11 * t[1, 2] + r12 * t[2, 2],
+            r20 * t[0, 0] + r21 * t[1, 0] + r22 * t[2, 0],
+            r20 * t[0, 1] + r21 * t[1, 1] + r22 * t[2, 1],
+            r20 * t[0, 2] + r21 * t[1, 2] + r22 * t[2, 2])
 
 
 @numba.njit(cache=True, inline='always')
