@@ -51,7 +51,7 @@ from probdis_ros.model.kinematics import (
 AT_FAILURE = 1e-6
 #: [m] along an edge (not at its start), a point this near a failure point is on it, where
 #: cos alpha is -1 (alpha = pi, ratio 1), as in the paper at the failure itself
-#: (_chunk_probabilities); nearer than this the direction to the failure is rounding's, and an
+#: (_rows_probabilities); nearer than this the direction to the failure is rounding's, and an
 #: edge that ends on a failure's configuration got any ratio from 0 to 1
 AT_FAILURE_POINT = 1e-9
 ALONG_NEAR2 = AT_FAILURE_POINT ** 2
@@ -115,12 +115,18 @@ def _chunk_poses(cs, sn, cd, sd, b, k0, count, n, kind, joint_params, offsets, b
             continue
         chain_pose(cs, sn, offsets, bases, tip_offset, tip_rotation, pos, rot, i)
     if kind != AXIS_CHAIN:
-        for i in range(count):
-            for k in range(3):
-                soa[k, i] = pos[i, k]
-            for k in range(9):
-                soa[3 + k, i] = rot[i, k // 3, k % 3]
+        _to_rows(pos, rot, count, soa)
     return low
+
+
+@numba.njit(cache=True, inline='always')
+def _to_rows(pos, rot, count, soa):
+    """Copy poses pos (count, 3) and rot (count, 3, 3) to rows 0-11 of the workspace soa."""
+    for i in range(count):
+        for k in range(3):
+            soa[k, i] = pos[i, k]
+        for k in range(9):
+            soa[3 + k, i] = rot[i, k // 3, k % 3]
 
 
 #: From this many failures on, a chunk skips the failures that cannot raise its maximum.
@@ -131,11 +137,7 @@ SKIP_FROM = 4
 def _chunk_probabilities(pos, rot, count, f_points, f_dirs, f_rots, c_fail, use_orient, prune,
                          soa, p_out, near2, at_failure):
     """Write :func:`_rows_probabilities` of the poses pos (count, 3) and rot (count, 3, 3)."""
-    for i in range(count):
-        for k in range(3):
-            soa[k, i] = pos[i, k]
-        for k in range(9):
-            soa[3 + k, i] = rot[i, k // 3, k % 3]
+    _to_rows(pos, rot, count, soa)
     _rows_probabilities(count, f_points, f_dirs, f_rots, c_fail, use_orient, prune, soa, p_out,
                         near2, at_failure)
 
@@ -318,7 +320,7 @@ ASIN_CUBE = 0.5707963267948967
 INV_PI = (1.0 + 1e-15) / np.pi
 
 
-#: Failures bounded at once by the vectorised loop of :func:`_chunk_probabilities` (AVX-512)
+#: Failures bounded at once by the vectorised loop of :func:`_rows_probabilities` (AVX-512)
 VECTOR = 8
 
 
@@ -328,7 +330,7 @@ def padded_count(n_fail):
     Return the columns of a map of n_fail failures in the kernels' arrays.
 
     From 2 VECTOR failures on, a multiple of VECTOR: the compiled bound loop of
-    :func:`_chunk_probabilities` runs VECTOR failures at a time from 2 VECTOR on, and the
+    :func:`_rows_probabilities` runs VECTOR failures at a time from 2 VECTOR on, and the
     rest one at a time, each costing about as much as VECTOR together.  The padding
     columns are copies of the last failure (finite: NaN columns made plans 10 % slower),
     flagged 0 in the fourth row of the points, and never evaluated.
@@ -341,7 +343,7 @@ def padded_count(n_fail):
 @numba.njit(cache=True, nogil=True)
 def workspace(n_fail):
     """
-    Return the scratch rows of :func:`_chunk_probabilities` for a map of n_fail failures.
+    Return the scratch rows of :func:`_rows_probabilities` for a map of n_fail failures.
 
     Rows 0-11: a chunk's poses, one row per coordinate; row 12: the failures' bounds;
     row 13: one failure's P_COORD at the chunk's points; row 14: the orientation factor
