@@ -27,6 +27,7 @@ import re
 
 import numpy as np
 from probdis_ros.model import iiwa_arm
+from probdis_ros.motion import state_check
 from probdis_ros.motion.detector import (
     BlockDetector,
     DetectorSettings,
@@ -552,6 +553,52 @@ def test_states_are_dated_by_their_stamps_on_the_receivers_clock():
     assert check.measured_at(5.4, 1005.03) == pytest.approx(5.0305)
     # unstamped states are dated on arrival
     assert gate().measured_at(7.0, 0.0) == 7.0
+
+
+@pytest.mark.parametrize('aging', [True, False])
+def test_an_arm_clock_drifting_slow_for_20_min_dates_its_states_within_milliseconds(
+        aging, monkeypatch):
+    # the arm's clock runs 500 ppm slow (NTP slewing it at its fastest): 20 min at rest,
+    # states at 10 Hz arriving 0.5-3 ms after they were stamped, then a motion at 1 kHz
+    if not aging:
+        monkeypatch.setattr(state_check, 'CLOCK_DRIFT', 0.0)   # the plain minimum of before
+    rate, span = 1.0 - 5e-4, 1200.0
+    rng = np.random.default_rng(5)
+    check, errors = gate(late=0.5), []
+    for t in np.arange(0.0, span, 0.1):
+        try:
+            check.check(t + rng.uniform(0.0005, 0.003), NAMES, Q0, stamp=1000.0 + rate * t)
+        except BadJointStateError:
+            continue
+        # the receiver's clock less the arm's: what a command for the arm is stamped back by
+        errors.append(check.clock_offset - (t - rate * t - 1000.0))
+    if not aging:   # why: stamped commands (a stop) would reach the arm's controller up to
+        # 0.5 s in its future, and then its states were refused as stale (a run stopped)
+        assert min(errors) < -0.45 and 'stale' in check.refusal
+        return
+    assert check.refused == 0 and max(np.abs(errors)) < 0.003
+    jtc = trajectory()
+    arm = follows(jtc, DetectorSettings())
+    detector = BlockDetector(jtc, span, DetectorSettings(), expect_motion=True)
+    worst, now = 0.0, span
+    for t in np.arange(span, span + jtc.duration + 1.0, 1.0 / RATE):
+        stamp, now = 1000.0 + rate * t, max(now, t + rng.uniform(0.0005, 0.003))
+        check.check(now, NAMES, arm(t - span), stamp=stamp)
+        worst = max(worst, abs(check.measured_at(now, stamp) - t))
+        verdict = detector.update(check.measured_at(now, stamp), arm(t - span))
+        if verdict is not Verdict.MOVING:
+            break
+    assert worst < 0.003 and verdict is Verdict.DONE
+
+
+def test_a_backlog_after_an_hour_of_drift_is_still_stale():
+    check = gate(late=0.5)
+    rate = 1.0 - 5e-4                     # NTP's largest slew
+    for t in np.arange(0.0, 3600.0, 0.1):
+        check.check(t + 0.001, NAMES, Q0, stamp=rate * t)
+    # queued for 0.6 s, then delivered at once: at most CLOCK_DRIFT x 0.6 s of aging
+    with pytest.raises(BadJointStateError, match=re.escape('stale (a backlog')):
+        check.check(3600.6 + 0.001, NAMES, Q0, stamp=rate * 3600.0)
 
 
 def sender_starved(start, until, end, catch_up=0.1, tick=0.02):

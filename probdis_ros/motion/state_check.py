@@ -44,7 +44,15 @@ receiver's clock by the stream's quickest delivery, not by when it arrived: arri
 whenever the receiver's or the sender's threads are starved (a burst of states held up for
 half a second and then delivered at once read as an arm lagging its command by half a
 second), the stamp does not; and the quickest delivery takes out any offset between the
-two clocks.
+two clocks.  The two clocks drift apart (quartz: tens of ppm; NTP slews at up to 500 ppm),
+and a plain minimum never rises to follow a clock that falls behind: beside an arm clock
+100 ppm slow, after an hour every state was dated 0.36 s early and a command stamped for
+the arm 0.36 s in its future, and after 83 min every state was refused as stale.  So the
+quickest delivery rises to the quickest of each ``DRIFT_SPAN`` of stamps when that lies
+above it by more than rounding (``DRIFT_NOISE``), by at most ``CLOCK_DRIFT`` a second: a
+backlog still reads as one, a rise of half a second taking over eight minutes; and below
+``DRIFT_NOISE`` the estimate stays put, so that a replay dates each state as the live node
+did (where the clocks drift, within one span's rise).
 """
 
 from __future__ import annotations
@@ -62,6 +70,13 @@ JUMP_SPEED = 1.5
 JUMP_SLACK = 0.05
 #: Without an accepted state for this long, the next one starts a new stream [s].
 SILENCE = 1.0
+#: The quickest delivery rises at most this fast, the clocks drifting apart [s/s] (NTP's
+#: largest slew is 5e-4; quartz 2e-5 to 5e-5) ...
+CLOCK_DRIFT = 1e-3
+#: ... to the quickest of each span of this many seconds of stamps ...
+DRIFT_SPAN = 1.0
+#: ... when that lies above it by more than this (rounding of stamps and receive times) [s].
+DRIFT_NOISE = 1e-4
 
 
 class BadJointStateError(ValueError):
@@ -123,7 +138,9 @@ class StateCheck:
         self.last_stamp = 0.0            # header stamp of the last accepted state; 0: none
         self.last_time = -np.inf         # host time of the last accepted state
         self.last_sequence = 0           # its publication sequence number; 0: unknown
-        self.quickest = np.inf           # the stream's smallest receive time - stamp [s]
+        self.quickest = np.inf           # the stream's quickest receive time - stamp [s]
+        self.span_quickest = np.inf      # ... within the span of stamps that began at
+        self.span_start = 0.0            # this stamp
         self.refused_at = -np.inf        # host time of the last refusal
         self.refusal = ''                # its reason
         self.refused = 0
@@ -150,7 +167,7 @@ class StateCheck:
         if stamp > 0:
             self.last_stamp = stamp
             if clock is None:
-                self.quickest = min(self.quickest, now - stamp)
+                self._follow_the_clocks(now - stamp, stamp)
         if sequence > 0:
             self.last_sequence = sequence
         return q, v
@@ -174,13 +191,25 @@ class StateCheck:
                 f'{self.velocity_limits[j]:.3f}: a glitch in the driver?')
         return v
 
+    def _follow_the_clocks(self, delivery: float, stamp: float) -> None:
+        """Take the delivery of a state stamped at stamp into the quickest delivery."""
+        self.quickest = min(self.quickest, delivery)
+        self.span_quickest = min(self.span_quickest, delivery)
+        span = stamp - self.span_start
+        if span >= DRIFT_SPAN:
+            rise = self.span_quickest - self.quickest
+            if rise > DRIFT_NOISE:       # the arm's clock fell behind (or a backlog)
+                self.quickest += min(rise, CLOCK_DRIFT * span)
+            self.span_quickest, self.span_start = np.inf, stamp
+
     def measured_at(self, now: float, stamp: float) -> float:
         """
         Return when the state just accepted at now was measured, on the receiver's clock [s].
 
         Its stamp plus the stream's quickest delivery (never later than now, and later than
-        the state before it, since stamps increase and the quickest only shrinks to a state
-        dated now); unstamped, and on simulated time, the state is dated now.
+        the state before it, since stamps increase, the quickest only falls to a state dated
+        now and rises by less than the stamps do); unstamped, and on simulated time, the
+        state is dated now.
         """
         if stamp > 0 and np.isfinite(self.quickest):
             return min(now, stamp + self.quickest)
@@ -245,6 +274,7 @@ class StateCheck:
         if now - self.last_time > self.silence:
             self.last_q, self.last_stamp = None, 0.0      # a new stream
             self.last_sequence, self.quickest = 0, np.inf
+            self.span_quickest, self.span_start = np.inf, 0.0
         if now < self.last_time:
             raise BadJointStateError(f'time went backwards by {self.last_time - now:.3f} s')
         if self.last_stamp > 0:
