@@ -149,12 +149,17 @@ def test_replay_finds_the_block_in_both_storage_formats(tmp_path, version, plugi
     assert t_stop + 0.3 - 0.02 <= block.t <= t_stop + 0.3 + 0.02
 
 
+@pytest.mark.parametrize('command_first', [False, True])
 def test_a_stamped_command_from_an_arm_whose_clock_is_off_is_replayed_on_the_bags_clock(
-        tmp_path):
+        tmp_path, command_first):
     # the planner stamps a desired start's command on the arm's clock (its joint states'),
     # 3 s ahead of its own here; the replay moves the stamp back by the states' offset, and
-    # finds the block where it finds it for the same command unstamped
+    # finds the block where it finds it for the same command unstamped; recorded before the
+    # first joint state too (by the offset that state then shows, not by none)
     messages, _, t_stop = simulated_run()
+    if command_first:
+        assert messages[0][1] == JS and messages[1][1] == TRAJ
+        messages = messages[1:]
 
     def stamped(fields, seconds):
         sec = int(seconds // 1)
@@ -165,6 +170,7 @@ def test_a_stamped_command_from_an_arm_whose_clock_is_off_is_replayed_on_the_bag
     write_bag(tmp_path / 'bag', off, *FORMATS[0])
     result = replay(tmp_path / 'bag')
     assert result.paths == 1 and len(result.blocks) == 1, result.problems
+    t_stop -= 0.05 if command_first else 0.0            # the recording starts at the command
     assert t_stop + 0.3 - 0.02 <= result.blocks[0].t <= t_stop + 0.3 + 0.02
 
 

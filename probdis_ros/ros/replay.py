@@ -39,7 +39,12 @@ from pathlib import Path
 import numpy as np
 from probdis_ros.model import FailureMap, iiwa_arm
 from probdis_ros.motion.detector import BlockDetector, DetectorSettings, Verdict
-from probdis_ros.motion.jtc import JTC_STARTS, JtcTrajectory, taken_trajectory
+from probdis_ros.motion.jtc import (
+    JTC_STARTS,
+    JtcTrajectory,
+    taken_trajectory,
+    TrajectoryCommand,
+)
 from probdis_ros.motion.state_check import StateCheck, values_by_name
 from probdis_ros.planning.disentangle import failure_from_block
 from probdis_ros.ros.bag_source import Bag, BagError
@@ -182,6 +187,14 @@ def _finish(result: ReplayResult) -> ReplayResult:
     return result
 
 
+def _on_recording_clock(command: TrajectoryCommand, clock_offset: float,
+                        t0: float) -> TrajectoryCommand:
+    """Return a command with its stamp, on the arm's clock, moved onto the recording's."""
+    if command.stamp <= 0:
+        return command
+    return replace(command, stamp=command.stamp + clock_offset - t0)
+
+
 def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: set[str],
          names: list[str], arm, given: DetectorSettings | None, result: ReplayResult,
          t0: float, overrides: dict) -> None:
@@ -224,14 +237,13 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
         if message.topic == trajectory_topic:
             try:
                 command = command_from_msg(msg, names, arm.lower, arm.upper)
-                if command.stamp > 0:      # on the arm's clock: moved onto the recording's
-                    command = replace(command, stamp=command.stamp + states.clock_offset - t0)
             except ValueError as err:
                 result.problems.append(f'{t:.3f} s: command refused: {err}')
                 continue
             if measured is None:       # JTC starts it from the first state it reads
-                early = (t, command)
+                early = (t, command)   # (its stamp moved by the offset that state shows)
                 continue
+            command = _on_recording_clock(command, states.clock_offset, t0)
             last = None
             if jtc_start == 'desired' and running is not None:
                 last = running[0].sample(t - running[1])
@@ -267,7 +279,7 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
         measured, measured_velocity = q, v
         if early is not None:
             sent, command = early
-            early = None
+            command, early = _on_recording_clock(command, states.clock_offset, t0), None
             running = (JtcTrajectory(command, q, measured_velocity, sent), sent)
             detector, kind = BlockDetector(running[0], sent, settings), 'path'
             result.paths += 1
