@@ -129,24 +129,26 @@ def motion_over(times: np.ndarray, positions: np.ndarray) -> tuple[float, float]
     """
     times = np.asarray(times, dtype=float)
     positions = np.asarray(positions, dtype=float)
-    if len(times) < 2 or times[-1] <= times[0]:
+    slope, spread = _line_fit(times, positions)
+    if spread == 0.0:
         return 0.0, 0.0
-    t = times - times.mean()
-    spread = float(np.sum(t * t))
     span = times[-1] - times[0]
     error = noise_of(positions) * span / np.sqrt(spread)
-    return (float(np.abs(slope_of(times, positions)).sum() * span),
-            NOISE_SIGMAS * float(error.sum()))
+    return float(np.abs(slope).sum() * span), NOISE_SIGMAS * float(error.sum())
 
 
 def slope_of(times: np.ndarray, positions: np.ndarray) -> np.ndarray:
     """Return each joint's least-squares slope over samples (times, positions (N, n))."""
-    times = np.asarray(times, dtype=float)
-    positions = np.asarray(positions, dtype=float)
+    return _line_fit(np.asarray(times, dtype=float), np.asarray(positions, dtype=float))[0]
+
+
+def _line_fit(times: np.ndarray, positions: np.ndarray) -> tuple[np.ndarray, float]:
+    """Return each joint's least-squares slope and the times' sum of squares about their mean."""
     if len(times) < 2 or times[-1] <= times[0]:
-        return np.zeros(positions.shape[1:])
+        return np.zeros(positions.shape[1:]), 0.0
     t = times - times.mean()
-    return (t @ (positions - positions.mean(axis=0))) / float(np.sum(t * t))
+    spread = float(np.sum(t * t))
+    return (t @ (positions - positions.mean(axis=0))) / spread, spread
 
 
 class Verdict(str, Enum):
