@@ -771,6 +771,21 @@ def test_on_simulated_time_a_block_is_detected_on_the_simulated_clock(ros, tmp_p
     ros.call('stop')
 
 
+def test_on_simulated_time_the_clock_never_reads_before_a_joint_state_taken(ros, tmp_path):
+    # a busy executor gets to /clock late, as to the states: a command timed by the old
+    # /clock began, for the detector and the recording, before a state already taken (a
+    # fast path read as not executed; a replay fed that state to the command: once in CI)
+    node = planner(ros, tmp_path, use_sim_time=True, state_timeout=0.5)
+    clock_pub = ros.probe.create_publisher(Clock, '/clock', 10)
+    clock_pub.publish(Clock(clock=Time(sec=1000)))
+    wait_for(lambda: node.sim_clock, 5, 'the clock')
+    state = Stream(ros, rate=1e-3).message(stamp=Time(sec=1000, nanosec=300_000_000))
+    ros.js_pub.publish(state)
+    wait_for(lambda: node.measured is not None, 5, 'the joint state')
+    assert node.measured_at == pytest.approx(1000.3)
+    assert node._now() == pytest.approx(1000.3)
+
+
 def test_on_simulated_time_start_needs_a_running_clock_and_a_run_stops_with_it(ros, tmp_path):
     node = planner(ros, tmp_path, use_sim_time=True, state_timeout=0.5, plan_time=5.0)
     Stream(ros, stamped=False)                   # judged at the node's (simulated) clock

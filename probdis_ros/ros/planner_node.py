@@ -544,7 +544,19 @@ class PlannerNode(Node):
     # -- services ----------------------------------------------------------------------
 
     def _now(self) -> float:
-        return self.get_clock().now().nanoseconds * 1e-9
+        """
+        Return the node's time [s]; on simulated time never before the newest joint state.
+
+        A busy executor falls behind on /clock as on the joint states; a command timed by a
+        /clock older than a state already taken (measured at its stamp) began, for the
+        detector, before the arm's time it was sent at (a fast path then read as not
+        executed), and before that state in the recording (a replay fed it to the command).
+        """
+        now = self.get_clock().now().nanoseconds * 1e-9
+        if self.use_sim_time and \
+                0.0 < self.measured_at - now <= self.get_parameter('state_timeout').value:
+            return self.measured_at
+        return now
 
     def _receive_time(self, info: dict) -> float:
         """
