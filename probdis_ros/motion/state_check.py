@@ -208,8 +208,8 @@ class StateCheck:
 
         Its stamp plus the stream's quickest delivery (never later than now, and later than
         the state before it, since stamps increase, the quickest only falls to a state dated
-        now and rises by less than the stamps do); unstamped, and on simulated time, the
-        state is dated now.
+        now, and a rise only dates it later); unstamped, and on simulated time, the state is
+        dated now.
         """
         if stamp > 0 and np.isfinite(self.quickest):
             return min(now, stamp + self.quickest)
