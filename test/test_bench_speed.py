@@ -234,3 +234,51 @@ def test_pruned_chunks_give_every_point_the_same_maximum_bit_for_bit():
                                                   out, edge_kernels.ALONG_NEAR2,
                                                   edge_kernels.ALONG_AT_FAILURE)
             np.testing.assert_array_equal(p_pruned[:len(points)], p_every[:len(points)])
+
+
+def test_the_probability_floor_lies_below_every_pose_the_arm_can_take():
+    # the floor that spares the best-first search points must hold at every reachable pose
+    from probdis_ros.model.edge_costs import tip_ball
+    from probdis_ros.model.edge_kernels import probability_floor
+
+    rng = np.random.default_rng(44)
+    center, radius = tip_ball(ARM)
+    poses = ARM.fk(ARM.random_configurations(rng, 100_000))
+    assert np.linalg.norm(poses.positions - center, axis=1).max() <= radius
+    start, goal, straight = straight_path_map(19)
+    maps = [(scattered_map(ARM, rng, 19), np.inf), (clustered_map(ARM, rng, 400), np.inf),
+            (straight, np.inf), (scattered_map(ARM, rng, 19), 1.5)]
+    floors = []
+    for fmap, reach in maps:
+        coster = FailureProbabilityObjective(reach=reach).coster(ARM, fmap)
+        points, directions, _, c_fail, use_orient, _ = coster._failures
+        floor = probability_floor(points, directions, c_fail[:2], use_orient, center, radius)
+        floors.append(floor)
+        assert 0.0 <= floor <= fmap.probability(poses, reach=reach).min()
+    assert floors[0] > 1e-4 and floors[1] > 1e-4       # not a bound of 0 on a real map
+
+
+def test_the_floor_changes_no_winner_on_equal_totals():
+    # the winning edge twice, before and after it: equal totals, which the search order
+    # would decide; the search with the floor must give what the plain search gives
+    rng = np.random.default_rng(55)
+    fmap = scattered_map(ARM, rng, 19)
+    floored = FailureProbabilityObjective().coster(ARM, fmap)
+    plain = FailureProbabilityObjective().coster(ARM, fmap, coster_type=UnprunedEdgeCoster)
+    assert floored._failures[3][2] > 0.0 and plain._failures[3][2] == 0.0
+    for _ in range(10):
+        sources = ARM.random_configurations(rng, 6)
+        target = ARM.random_configurations(rng, 1)[0]
+        for base in (np.zeros(6), rng.uniform(0.0, 0.5, 6)):
+            for toward in (True, False):
+                best, _ = plain.cheapest(sources, target, toward, base)
+                for twin in (0, 5):
+                    if twin == best:
+                        continue
+                    copies, bases = sources.copy(), base.copy()
+                    copies[twin], bases[twin] = sources[best], base[best]
+                    assert floored.cheapest(copies, target, toward, bases) == \
+                        plain.cheapest(copies, target, toward, bases)
+        limits = plain.costs(sources, target) * rng.uniform(0.8, 1.2, 6)
+        np.testing.assert_array_equal(floored.costs(sources, target, limits=limits),
+                                      plain.costs(sources, target, limits=limits))
