@@ -181,7 +181,7 @@ class EdgeCoster:
             bool(prune))
         # the floor of the map's probabilities, c_fail[2] of the kernels (exact pruning too:
         # edge_kernels.cheapest_edge_kernel)
-        term = floor_term(arm, self._failures) if prune else 0.0
+        term = floor_term(arm, self._failures) if prune and self.terms.risk_weight > 0 else 0.0
         self._failures = (*self._failures[:3], (*self._failures[3], term),
                           *self._failures[4:])
         self._arm = arm.kernel_params()
