@@ -159,6 +159,7 @@ def bench_plan(seeds: int = 20, large: int = 400, reach: float = math.inf,
     result = {'machine': machine(), 'seeds': seeds, 'load_average': os.getloadavg()[0],
               'reach': reach, 'table': table}
     for key, begin, end, the_map in maps:
+        result[f'least_s_{key}'] = least_probability_seconds(arm, the_map, reach)
         times, cpu_times, rewires = [], [], []
         for seed in range(seeds):
             t0, c0 = time.perf_counter(), time.process_time()
@@ -170,6 +171,27 @@ def bench_plan(seeds: int = 20, large: int = 400, reach: float = math.inf,
         result[f'cpu_median_s_{key}'] = statistics.median(cpu_times)
         result[f'rewires_per_plan_{key}'] = statistics.fmean(rewires)
     return result
+
+
+def least_probability_seconds(arm, fmap, reach: float) -> float:
+    """
+    Return the seconds of one search of the map's least probability (0: none made).
+
+    A planner searches it once for a map, and again only once the map has grown by a
+    quarter (:mod:`probdis_ros.model.least_probability`): ``bench plan``'s medians, many
+    plans on one map, leave it out; a run, adding a failure a plan, pays it again each time
+    its map has grown by a quarter.
+    """
+    from probdis_ros.model.least_probability import least_probability, tip_ball
+    from probdis_ros.planning import FailureProbabilityObjective
+
+    failures = FailureProbabilityObjective(reach=reach).coster(arm, fmap)._failures
+    ball = tip_ball(arm)
+    if failures[3][2] == 0.0 or ball is None:
+        return 0.0
+    began = time.perf_counter()
+    least_probability(*failures[:2], failures[3][:2], failures[4], *ball)
+    return time.perf_counter() - began
 
 
 # -- path quality beside OMPL's BIT* (probdis bench quality) ----------------------------------
@@ -467,6 +489,9 @@ def cmd_bench_plan(args) -> int:
         print(f'  {name.replace("_", " ") + ":":14s}{result[key]:.4f} s wall, '
               f'{result["cpu_median_s_" + name]:.4f} s CPU   (RRT* re-parentings per plan: '
               f'{result["rewires_per_plan_" + name]:.1f})')
+        if result['least_s_' + name]:
+            print(f'{"":16s}its least probability searched once: '
+                  f'{1e3 * result["least_s_" + name]:.1f} ms')
     print(f'machine: {result["machine"]}; load average {result["load_average"]:.1f}')
     return 0
 

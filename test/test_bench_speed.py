@@ -21,6 +21,7 @@ import numpy as np
 from probdis_ros.bench import add_plan_command, straight_path_map
 from probdis_ros.model import arm_for_setting, FailureMap
 from probdis_ros.model.edge_costs import EdgeCoster
+from probdis_ros.model.edge_kernels import padded_count
 from probdis_ros.model.tree_kernels import farthest_kernel, nearest_order
 from probdis_ros.planning import HardThresholdObjective, ProbRRT, RRTSettings
 from probdis_ros.planning.objectives import FailureProbabilityObjective
@@ -236,31 +237,30 @@ def test_pruned_chunks_give_every_point_the_same_maximum_bit_for_bit():
             np.testing.assert_array_equal(p_pruned[:len(points)], p_every[:len(points)])
 
 
-def test_the_probability_floor_lies_below_every_pose_the_arm_can_take():
-    # the floor that spares the best-first search points must hold at every reachable pose
-    from probdis_ros.model.edge_costs import tip_ball
-    from probdis_ros.model.edge_kernels import probability_floor
+def test_the_least_probability_lies_below_every_pose_the_arm_can_take():
+    # the bound that spares the best-first search points must hold at every reachable pose
+    from probdis_ros.model.least_probability import least_probability, tip_ball
 
     rng = np.random.default_rng(44)
     center, radius = tip_ball(ARM)
     poses = ARM.fk(ARM.random_configurations(rng, 100_000))
     assert np.linalg.norm(poses.positions - center, axis=1).max() <= radius
-    start, goal, straight = straight_path_map(19)
+    straight = straight_path_map(19)[2]
     maps = [(scattered_map(ARM, rng, 19), np.inf), (clustered_map(ARM, rng, 400), np.inf),
             (straight, np.inf), (scattered_map(ARM, rng, 19), 1.5)]
-    floors = []
+    leasts = []
     for fmap, reach in maps:
         coster = FailureProbabilityObjective(reach=reach).coster(ARM, fmap)
         points, directions, _, c_fail, use_orient, _ = coster._failures
-        floor = probability_floor(points, directions, c_fail[:2], use_orient, center, radius)
-        floors.append(floor)
-        assert 0.0 <= floor <= fmap.probability(poses, reach=reach).min()
-    assert floors[0] > 1e-4 and floors[1] > 1e-4       # not a bound of 0 on a real map
+        least = least_probability(points, directions, c_fail[:2], use_orient, center, radius)
+        leasts.append(least)
+        assert 0.0 <= least <= fmap.probability(poses, reach=reach).min()
+    assert leasts[0] > 1e-4 and leasts[1] > 1e-4       # not a bound of 0 on a real map
 
 
-def test_the_floor_changes_no_winner_on_equal_totals():
+def test_the_least_point_cost_changes_no_winner_on_equal_totals():
     # the winning edge twice, before and after it: equal totals, which the search order
-    # would decide; the search with the floor must give what the plain search gives
+    # would decide; the search with the least point cost must give what the plain one gives
     rng = np.random.default_rng(55)
     fmap = scattered_map(ARM, rng, 19)
     floored = FailureProbabilityObjective().coster(ARM, fmap)
@@ -282,3 +282,38 @@ def test_the_floor_changes_no_winner_on_equal_totals():
         limits = plain.costs(sources, target) * rng.uniform(0.8, 1.2, 6)
         np.testing.assert_array_equal(floored.costs(sources, target, limits=limits),
                                       plain.costs(sources, target, limits=limits))
+
+
+def test_a_least_probability_found_serves_the_maps_grown_from_it(monkeypatch):
+    # a run adds a failure a plan: the bound of a map holds for every map with its failures,
+    # so it is searched again only once the map has grown by a quarter, or is another map
+    from probdis_ros.model import least_probability as least
+
+    searched = []
+
+    def counted(*args):
+        searched.append(args[0].shape[1])
+        return search(*args)
+
+    search = least.least_probability
+    monkeypatch.setattr(least, 'least_probability', counted)
+    monkeypatch.setattr(least, '_KNOWN', [])
+    rng = np.random.default_rng(66)
+    fmap = scattered_map(ARM, rng, 20)
+
+    def least_cost():
+        return FailureProbabilityObjective().coster(ARM, fmap)._failures[3][2]
+
+    first = least_cost()
+    assert first > 0.0 and len(searched) == 1
+    grown = scattered_map(ARM, rng, 10)
+    for point, direction, orientation in zip(*grown.arrays()):
+        fmap.add(point, direction, orientation)
+        cost = least_cost()
+        if len(fmap) <= 25:
+            assert cost == first and len(searched) == 1       # the first map's bound
+        poses = ARM.fk(ARM.random_configurations(rng, 2000))
+        assert -np.log1p(-fmap.probability(poses).min()) >= cost     # a bound still
+    assert len(searched) == 2 and searched[-1] == padded_count(26)
+    FailureProbabilityObjective().coster(ARM, scattered_map(ARM, rng, 20))
+    assert len(searched) == 3                                 # another map: searched

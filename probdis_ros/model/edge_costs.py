@@ -25,9 +25,6 @@ gives the same paths with either.
 
 from __future__ import annotations
 
-import hashlib
-import math
-
 import numpy as np
 from probdis_ros.model.arms import Arm, quaternion_to_rotation
 from probdis_ros.model.edge_kernels import (
@@ -35,10 +32,9 @@ from probdis_ros.model.edge_kernels import (
     cheapest_edge_kernel,
     edge_costs_kernel,
     padded_count,
-    probability_floor,
 )
 from probdis_ros.model.failure_map import FailureMap
-from probdis_ros.model.kinematics import AXIS_CHAIN
+from probdis_ros.model.least_probability import least_point_cost
 from probdis_ros.model.path_cost import DEFAULT_DELTA, edge_points, EdgeTerms, P_MAX
 
 
@@ -58,60 +54,6 @@ def _columns(values: np.ndarray) -> np.ndarray:
     columns = np.moveaxis(values, 0, -1)
     index = np.minimum(np.arange(padded_count(len(values))), len(values) - 1)
     return np.ascontiguousarray(columns[..., index])
-
-
-def tip_ball(arm: Arm) -> tuple[np.ndarray, float] | None:
-    """
-    Return (center, radius) of a ball that holds the arm's tip in every configuration.
-
-    An AXIS_CHAIN's first offset is fixed, and so is the second if it lies along the first
-    joint's axis; the rest can at most add up (with margins above the rounding).  None for
-    other arms.
-    """
-    kind, codes, offsets, _, tip_offset, _ = arm.kernel_params()
-    if kind != AXIS_CHAIN or len(offsets) < 2:
-        return None
-    center = np.array(offsets[0], dtype=float)
-    rest = np.asarray(offsets[1:], dtype=float)
-    axis = np.zeros(3)
-    axis[int(abs(codes[0])) - 1] = 1.0
-    if np.all(np.cross(axis, rest[0]) == 0.0):
-        center = center + rest[0]
-        rest = rest[1:]
-    radius = float(np.linalg.norm(rest, axis=1).sum() + np.linalg.norm(tip_offset))
-    return center, radius * (1.0 + 1e-9) + 1e-9
-
-
-#: Floors already found, by map, kernel and arm (:func:`floor_term`): a planner costs many
-#: plans on one map
-_FLOORS: dict[bytes, float] = {}
-#: A floor below this is not used (it would spare no search a point)
-LEAST_FLOOR = 1e-5
-
-
-def floor_term(arm: Arm, failures: tuple) -> float:
-    """
-    Return the least cost a point of any edge adds per unit of weight (0: none known).
-
-    ``-log(1 - p)`` at the map's floor p (:func:`probability_floor`, with a margin below
-    it), where the arm's tip ball (:func:`tip_ball`) is known and the floor is at least
-    LEAST_FLOOR.  Remembered for the last few maps.
-    """
-    ball = tip_ball(arm)
-    points, directions, _, c_fail, use_orient, _ = failures
-    if ball is None or points.shape[1] == 0:
-        return 0.0
-    center, radius = ball
-    key = hashlib.sha256(b''.join([points.tobytes(), directions.tobytes(),
-                                   np.array([*c_fail, use_orient, *center, radius]).tobytes()])
-                         ).digest()
-    if key not in _FLOORS:
-        if len(_FLOORS) >= 16:
-            _FLOORS.pop(next(iter(_FLOORS)))
-        floor = probability_floor(points, directions, c_fail, use_orient, center, radius)
-        _FLOORS[key] = -math.log1p(-min(floor, P_MAX)) * (1.0 - 1e-6) \
-            if floor >= LEAST_FLOOR else 0.0
-    return _FLOORS[key]
 
 
 def _batch(arm: Arm, sources: np.ndarray, target: np.ndarray, base, limits):
@@ -173,17 +115,15 @@ class EdgeCoster:
         points, directions, orientations = fmap.arrays()    # the same failures, whole
         rotations = quaternion_to_rotation(orientations).reshape(-1, 3, 3)
         flags = (np.arange(padded_count(len(points))) < len(points)).astype(float)
-        self._failures = (
-            np.ascontiguousarray(np.vstack([_columns(_padded(points, dim)), flags])),
-            _columns(_padded(directions, dim)),
-            _columns(rotations),
-            (self.c_fail, 1.0 / self.terms.reach ** 2), bool(arm.task_space.has_orientation),
-            bool(prune))
-        # the floor of the map's probabilities, c_fail[2] of the kernels (exact pruning too:
-        # edge_kernels.cheapest_edge_kernel)
-        term = floor_term(arm, self._failures) if prune and self.terms.risk_weight > 0 else 0.0
-        self._failures = (*self._failures[:3], (*self._failures[3], term),
-                          *self._failures[4:])
+        failures = (np.ascontiguousarray(np.vstack([_columns(_padded(points, dim)), flags])),
+                    _columns(_padded(directions, dim)), _columns(rotations),
+                    (self.c_fail, 1.0 / self.terms.reach ** 2),
+                    bool(arm.task_space.has_orientation))
+        # the least cost a point adds, c_fail[2] of the kernels (exact pruning too:
+        # edge_kernels.cheapest_edge_kernel; none where the cost has no risk term)
+        least = least_point_cost(arm, points, directions, failures, self.terms.reach, P_MAX) \
+            if prune and self.terms.risk_weight > 0 else 0.0
+        self._failures = (*failures[:3], (*failures[3], least), failures[4], bool(prune))
         self._arm = arm.kernel_params()
         self._table = arm.table_params()
         self._terms = (float(self.terms.length_weight), float(self.terms.risk_weight),

@@ -29,13 +29,12 @@ failures reads each coordinate contiguously): points (4, F) (the fourth row 1 fo
 failure, 0 for padding), unit directions (3, F) (z = 0 in 2-D), rotations (3, 3, F) of the
 failure orientations (F: the map's failures, padded to a multiple of VECTOR from 2 VECTOR
 on with copies of the last, which no kernel evaluates: :func:`padded_count`), c_fail as the
-triple (C_FAIL, 1 / reach^2, floor term) (0: no reach, the paper's kernel; the floor term:
-the least cost any point adds per unit of weight, from :func:`probability_floor`, 0: none
-known), and use_orient.  The arm's table (:mod:`probdis_ros.model.table`): its collision
-shapes (S, 9) and the floor no point may go below (-inf: no table, and nothing is checked).
+triple (C_FAIL, 1 / reach^2, least point cost) (0: no reach, the paper's kernel; the least
+cost any point of any edge adds per unit of weight, from
+:mod:`probdis_ros.model.least_probability`, 0: none known), and use_orient.  The arm's
+table (:mod:`probdis_ros.model.table`): its collision shapes (S, 9) and the floor no point
+may go below (-inf: no table, and nothing is checked).
 """
-
-import heapq
 
 import numba
 import numpy as np
@@ -375,7 +374,7 @@ def _coord_probability(dx, dy, dz, ux, uy, uz, c_fail, near2, at_failure):
     """
     Return P_COORD of one failure at offset (dx, dy, dz) from it to the point.
 
-    c_fail is (C_FAIL, 1 / reach^2): the taper of FailureMap.probability, which is exactly
+    c_fail starts (C_FAIL, 1 / reach^2): the taper of FailureMap.probability, which is exactly
     1.0 with no reach (0), so that the paper's kernel gives the same numbers bit for bit.
     """
     d2 = dx * dx + dy * dy + dz * dz
@@ -475,7 +474,7 @@ def edge_cost_kernel(a, b, limit, delta, length_weight, risk_weight, cap, p_max,
     """
     Return the cost of edge a -> b, or inf once it reaches limit (it only grows on the way).
 
-    Also inf as soon as the cost so far and the remaining points at the map's floor
+    Also inf as soon as the cost so far and the remaining points at their least cost
     (c_fail[2], :func:`cheapest_edge_kernel`) reach limit: the cost would reach it too.
 
     ``length_weight L - risk_weight sum (s/delta) log(1 - p)``, inf if a p > cap is not on the
@@ -498,7 +497,7 @@ def edge_cost_kernel(a, b, limit, delta, length_weight, risk_weight, cap, p_max,
     if f_points.shape[1] == 0 and floor == -np.inf:
         return cost
     weight = risk_weight * (length / n) / delta
-    # the least each point adds (the map's floor, :func:`cheapest_edge_kernel`)
+    # the least each point adds (:func:`cheapest_edge_kernel`)
     tail = weight * c_fail[2] if prune and limit < np.inf else 0.0
     if tail > 0.0 and cost + _ahead(tail, n, cost) >= limit:
         return np.inf
@@ -564,16 +563,16 @@ def edge_costs_kernel(sources, target, base, limits, toward, delta, length_weigh
 
 
 @numba.njit(cache=True, inline='always')
-def _ahead(tail, remaining, bound):
+def _ahead(tail, remaining, so_far):
     """
-    Return a lower bound of what an edge's remaining points add to its cost so far, bound.
+    Return a lower bound of what an edge's remaining points add to its cost so far.
 
-    tail is the least a point adds (its weight times the map's floor term, c_fail[2]),
+    tail is the least a point adds (its weight times the least point cost, c_fail[2]),
     less margins above the rounding of the chunks' sums (:func:`edge_cost_kernel`).
     """
     if tail == 0.0 or remaining == 0:
         return 0.0
-    return max(0.0, tail * remaining - 1e-12 * abs(bound))
+    return max(0.0, tail * remaining - 1e-12 * abs(so_far))
 
 
 @numba.njit(cache=True, nogil=True)
@@ -593,13 +592,13 @@ def cheapest_edge_kernel(sources, target, base, toward, delta, length_weight, ri
     kernel).
     Edges run sources[i] -> target if toward, else target -> sources[i].
 
-    With a floor of the map's probabilities (c_fail[2], the least cost a point adds per unit
-    of weight: :func:`probability_floor`; 0: none), each bound also counts the edge's
-    remaining points at that floor (:func:`_ahead`): a tighter lower bound, so that losing
-    edges stop sooner (a fifth to a third fewer points in RRT*'s choice of parent).  The
-    search then advances edges in another order, which changes nothing unless two totals
-    tie; so if, at the end, another edge's bound does not exceed the winner's total, the
-    search runs again without the floor, as before, and its answer is returned.
+    With a least point cost (c_fail[2], the least cost any point adds per unit of weight:
+    :mod:`probdis_ros.model.least_probability`; 0: none), each bound also counts the
+    edge's remaining points at that cost (:func:`_ahead`): a tighter lower bound, so that
+    losing edges stop sooner (a fifth to a third fewer points in RRT*'s choice of parent).
+    The search then advances edges in another order, which changes nothing unless two
+    totals tie; so if, at the end, another edge's bound does not exceed the winner's total,
+    the search runs again without it, as before, and its answer is returned.
     """
     m, n_joints = sources.shape
     bound = np.empty(m)           # lower bound of the total (exact when done)
@@ -621,9 +620,7 @@ def cheapest_edge_kernel(sources, target, base, toward, delta, length_weight, ri
     p_buf = np.empty(CHUNK)
     term = c_fail[2] if prune else 0.0
     for attempt in range(2):
-        use_floor = attempt == 0 and term > 0.0
-        if attempt == 1 and not term > 0.0:
-            break
+        use_tail = attempt == 0 and term > 0.0
         for i in range(m):
             a = sources[i] if toward else target
             b = target if toward else sources[i]
@@ -642,7 +639,7 @@ def cheapest_edge_kernel(sources, target, base, toward, delta, length_weight, ri
             n = max(1, int(np.ceil(length / delta - 1e-12)))
             steps[i] = n
             weight[i] = risk_weight * (length / n) / delta
-            tail[i] = weight[i] * term if use_floor else 0.0
+            tail[i] = weight[i] * term if use_tail else 0.0
             if cap < np.inf:    # the start's probability needs them now; else when first picked
                 _edge_rotations(a, b, n, kind, cs[i], sn[i], cd[i], sd[i])
             for j in range(n_joints):
@@ -669,7 +666,7 @@ def cheapest_edge_kernel(sources, target, base, toward, delta, length_weight, ri
             if pick < 0:
                 return -1, np.inf
             if done[pick]:
-                if use_floor:
+                if use_tail:
                     for i in range(m):      # a tie the order of the search might decide
                         if i != pick and np.isfinite(bound[i]) and bound[i] + _ahead(
                                 tail[i], steps[i] - k_done[i], bound[i]) <= bound[pick]:
@@ -706,121 +703,4 @@ def cheapest_edge_kernel(sources, target, base, toward, delta, length_weight, ri
                 bound[i] -= weight[i] * log_survival
             if k_done[i] == steps[i]:
                 done[i] = True
-    return -1, np.inf
-
-
-#: Cells per side of the first grid of :func:`probability_floor`'s search
-FLOOR_GRID = 4
-#: Halvings of a cell at most in :func:`probability_floor`'s search
-FLOOR_DEPTH = 7
-#: The search ends once every cube's bound is this close to the least probability seen
-FLOOR_CLOSE = 0.9
-
-
-@numba.njit(cache=True, nogil=True)
-def _cube_bound(f_points, f_dirs, c_fail, half, x, y, z, r, hint, inside, enough):
-    """
-    Return (bound, best failure, probability at the center) of a cube for the floor.
-
-    The bound holds at every point within r of (x, y, z) (:func:`probability_floor`);
-    the probability at the center (as bounded there: P_COORD times half) only if inside,
-    else 0.  The hint failure is bounded first, and the others only until the bound
-    reaches enough (and the center's probability too, if inside): above it, its exact
-    value does not matter.
-    """
-    bound = 0.0
-    at_center = 0.0
-    best = hint
-    for slot in range(f_points.shape[1]):
-        f = hint if slot == 0 else slot - 1 if slot <= hint else slot
-        if f_points[3, f] == 0.0:
-            continue
-        dx = f_points[0, f] - x
-        dy = f_points[1, f] - y
-        dz = f_points[2, f] - z
-        dist = np.sqrt(dx * dx + dy * dy + dz * dz)
-        c = (f_dirs[0, f] * dx + f_dirs[1, f] * dy + f_dirs[2, f] * dz) / max(dist, 1e-300)
-        alpha = np.arccos(min(1.0, max(-1.0, c)))
-        if inside:
-            ratio = alpha / np.pi
-            near_taper = max(0.0, 1.0 - dist * dist * c_fail[1])
-            at_center = max(at_center, half * ratio * ratio * ratio
-                            * (near_taper * near_taper) / (1.0 + c_fail[0] * dist * dist))
-        if dist <= r:
-            continue
-        far = (dist + r) * (1.0 + 1e-12)
-        taper = max(0.0, 1.0 - far * far * c_fail[1])
-        low = max(0.0, alpha - np.arcsin(min(1.0, r / dist)) - ANGLE_MARGIN) / np.pi
-        value = half * low * low * low * (taper * taper) / (1.0 + c_fail[0] * far * far)
-        if value > bound:
-            bound = value
-            best = f
-        if bound >= enough and (not inside or at_center >= enough):
-            break
-    return bound, best, at_center
-
-
-@numba.njit(cache=True, nogil=True)
-def probability_floor(f_points, f_dirs, c_fail, use_orient, center, radius):
-    """
-    Return a lower bound of the failure probability at every pose the arm can take.
-
-    The arm's tip stays in the ball (center, radius); the probability of a pose is at least
-    max over failures of P_COORD / 2 (the orientation factor is at least 1/2; 1 without
-    orientation).  Branch and bound over cubes covering the ball: in a cube of half
-    diagonal r about x0, a failure at distance D from x0 is at most D + r away and its
-    alpha at least the center's less asin(r / D), which bounds its P_COORD from below (a
-    taper too); the bound of a cube is the best failure's.  The cube of the least bound is
-    halved (at most FLOOR_DEPTH times) until that bound is FLOOR_CLOSE times the least
-    probability found at a cube's center (which the floor cannot exceed); the result is
-    the least bound of the cubes left.  Margins above the rounding (the kernels' arccos
-    included) make it a bound of the numbers the kernels compute.  0 for an empty map, or
-    where failures taper to 0 (a finite reach smaller than the arm's).
-    """
-    if f_points.shape[1] == 0:
-        return 0.0
-    half = 0.5 * (1.0 - 1e-6) if use_orient else 1.0 - 1e-6
-    side = radius / FLOOR_GRID
-    seen = np.inf         # the least probability (as bounded from below) at a center
-    # a heap of cubes: bound, center, half side, depth, the failure that bounded it best
-    heap = [(0.0, 0.0, 0.0, 0.0, 0.0, 0, 0)]
-    heap.pop()
-    floor = np.inf
-    level = 0
-    hint = 0
-    h = 2.0 * side
-    x = y = z = 0.0
-    first = True
-    while first or len(heap) > 0:
-        if not first:
-            bound, x, y, z, h, level, hint = heapq.heappop(heap)
-            if bound >= FLOOR_CLOSE * seen or level == FLOOR_DEPTH:
-                floor = min(floor, bound)
-                if bound >= FLOOR_CLOSE * seen:
-                    break
-                continue
-        # the cube's children (the first grid at first)
-        h2 = 0.5 * h
-        count = FLOOR_GRID ** 3 if first else 8
-        for i in range(count):
-            if first:
-                cx = center[0] + (2 * (i % FLOOR_GRID) + 1 - FLOOR_GRID) * side
-                cy = center[1] + (2 * (i // FLOOR_GRID % FLOOR_GRID) + 1 - FLOOR_GRID) * side
-                cz = center[2] + (2 * (i // FLOOR_GRID ** 2) + 1 - FLOOR_GRID) * side
-            else:
-                cx = x + (h2 if i & 1 else -h2)
-                cy = y + (h2 if i & 2 else -h2)
-                cz = z + (h2 if i & 4 else -h2)
-            r = h2 * np.sqrt(3.0) * (1.0 + 1e-12)
-            to_center = np.sqrt((cx - center[0]) ** 2 + (cy - center[1]) ** 2
-                                + (cz - center[2]) ** 2)
-            if to_center > radius + r:
-                continue
-            inside = to_center <= radius
-            child, best, at_center = _cube_bound(f_points, f_dirs, c_fail, half, cx, cy, cz, r,
-                                                 hint, inside, seen)
-            if inside:
-                seen = min(seen, at_center)
-            heapq.heappush(heap, (child, cx, cy, cz, h2, level + (0 if first else 1), best))
-        first = False
-    return floor * (1.0 - 1e-6) if np.isfinite(floor) else 0.0
+    return -1, np.inf       # not reached: the search without tails ends in a return
