@@ -31,7 +31,8 @@ import os
 from pathlib import Path
 
 #: The files of the model package that hold compiled kernels (they call one another).
-KERNEL_FILES = ('fast_math.py', 'kinematics.py', 'edge_kernels.py', 'tree_kernels.py')
+KERNEL_FILES = ('fast_math.py', 'kinematics.py', 'edge_kernels.py', 'tree_kernels.py',
+                'least_probability.py')
 #: The stamp written beside the cached kernels.
 STAMP = 'probdis_kernels.sha256'
 
