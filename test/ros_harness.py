@@ -39,6 +39,8 @@ from trajectory_msgs.msg import JointTrajectory
 
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 JOINTS = [f'lbr_A{i}' for i in range(1, 8)]
+#: [s] for a server found by a client to find the client's reply reader too (RosTest.call)
+REPLY_MATCH = 0.3
 _DOMAINS = itertools.count((os.getpid() * 7) % 60 + 100)
 
 
@@ -60,6 +62,7 @@ class RosTest:
         rclpy.init(context=self.context, domain_id=self.domain)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.nodes = []
+        self._clients = {}
         self.probe = rclpy.create_node('probe', context=self.context)
         self.trajectories: list[tuple[float, JointTrajectory]] = []
         self.statuses: list[dict] = []
@@ -90,12 +93,24 @@ class RosTest:
         self.js_pub.publish(msg)
 
     def call(self, service: str, timeout: float = 10.0) -> Trigger.Response:
-        """Call a planner Trigger service from the probe."""
-        client = self.probe.create_client(Trigger, f'/probdis_planner/{service}')
-        wait_for(client.service_is_ready, timeout, f'service {service}')
+        """
+        Call a planner Trigger service from the probe.
+
+        One client per service, kept: a client is ready once it has found the server, but
+        the server must also find the client's reply reader, and a reply it sends before
+        that is lost (rmw: "failed to send response (timeout)", seen in CI under load: the
+        call then waited out its timeout).  So whenever the server had to be waited for (a
+        new client, or a planner started again), the call waits REPLY_MATCH longer.
+        """
+        client = self._clients.get(service)
+        if client is None:
+            client = self._clients[service] = self.probe.create_client(
+                Trigger, f'/probdis_planner/{service}')
+        if not client.service_is_ready():
+            wait_for(client.service_is_ready, timeout, f'service {service}')
+            time.sleep(REPLY_MATCH)
         future = client.call_async(Trigger.Request())
         wait_for(future.done, timeout, f'answer of {service}')
-        self.probe.destroy_client(client)
         return future.result()
 
     @property
