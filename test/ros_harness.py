@@ -28,6 +28,7 @@ import threading
 import time
 
 import numpy as np
+from probdis_ros.ros.client import REPLY_MATCH
 import rclpy
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
@@ -39,8 +40,6 @@ from trajectory_msgs.msg import JointTrajectory
 
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 JOINTS = [f'lbr_A{i}' for i in range(1, 8)]
-#: [s] for a server found by a client to find the client's reply reader too (RosTest.call)
-REPLY_MATCH = 0.3
 _DOMAINS = itertools.count((os.getpid() * 7) % 60 + 100)
 
 
@@ -100,7 +99,8 @@ class RosTest:
         the server must also find the client's reply reader, and a reply it sends before
         that is lost (rmw: "failed to send response (timeout)", seen in CI under load: the
         call then waited out its timeout).  So whenever the server had to be waited for (a
-        new client, or a planner started again), the call waits REPLY_MATCH longer.
+        new client, or a planner started again), the call waits REPLY_MATCH longer, as
+        probdis_ros.ros.client does.
         """
         client = self._clients.get(service)
         if client is None:

@@ -35,6 +35,9 @@ from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
 PLANNER = '/probdis_planner'
+#: [s] for a service found by a client to find the client's reply reader too (a reply sent
+#: before that is lost), waited before each request
+REPLY_MATCH = 0.3
 #: Why a planner may be slow to offer its services (said by the client and the demo).
 FIRST_START = ("a planner's first start after an install compiles its kernels, 20-50 s "
                'on two cores; later starts take seconds')
@@ -95,6 +98,12 @@ class PlannerClient:
                     raise TimeoutError(f'no {self.planner}/{service} service within '
                                        f'{timeout:g} s; is the planner running? '
                                        f'({FIRST_START})')
+                self.executor.spin_once(timeout_sec=0.05)
+            # a server the client has found must find the client's reply reader too, and a
+            # reply sent before that is lost (rmw: "failed to send response (timeout)"; seen
+            # in CI under load): let discovery finish before the request
+            settle = time.monotonic() + REPLY_MATCH
+            while time.monotonic() < settle:
                 self.executor.spin_once(timeout_sec=0.05)
             # the answer has its own time: a service that came up just before the deadline
             # has not had the time to answer (it did not answer is not it was not called)
