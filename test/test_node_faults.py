@@ -484,6 +484,16 @@ def test_startup_parameters_out_of_range_give_one_line_naming_the_parameter(
     assert len(lines) == 1 and name in lines[0] and 'Traceback' not in err, err
 
 
+def test_arguments_outside_ros_args_end_the_node_with_one_line(ros, tmp_path):
+    # rclpy ignores them: a goal given without --ros-args was lost, and the node ran on
+    command = [sys.executable, '-m', 'probdis_ros.ros.planner_node', '-p',
+               f'goal:={GOAL.tolist()}']
+    done = subprocess.run(command, env=dict(os.environ, ROS_DOMAIN_ID=str(ros.domain)),
+                          capture_output=True, text=True, timeout=60)
+    lines = [line for line in done.stderr.splitlines() if line.strip()]
+    assert done.returncode == 2 and len(lines) == 1 and '--ros-args' in lines[0], done.stderr
+
+
 def test_parameters_that_do_not_go_together_are_refused_when_set(ros, tmp_path):
     # checked only at ~/start before, where the error escaped the service and killed the node
     node = planner(ros, tmp_path)

@@ -55,9 +55,10 @@ def planner(ros, tmp_path, **params):
     """Start a planner node in-process (fast motions; nodes share one interpreter)."""
     params = {'velocity_scaling': 0.7, 'state_timeout': 2.0, 'bag_dir': str(tmp_path / 'bags'),
               **params}
-    goal = np.asarray(params.pop('goal', GOAL))
-    overrides = [Parameter('goal', value=goal.tolist()),
-                 Parameter('map_file', value=str(tmp_path / 'map.json'))]
+    goal = params.pop('goal', GOAL)           # None: not given
+    overrides = [Parameter('map_file', value=str(tmp_path / 'map.json'))]
+    if goal is not None:
+        overrides.append(Parameter('goal', value=np.asarray(goal, dtype=float).tolist()))
     overrides += [Parameter(k, value=v) for k, v in params.items()]
     return ros.add(PlannerNode(context=ros.context, parameter_overrides=overrides))
 
@@ -234,19 +235,30 @@ def test_the_robot_experiment_hands_the_node_its_informed_ideas():
 
 
 @pytest.mark.parametrize('a1, reason', [
-    (4.0, 'outside the joint limits'),
+    (4.0, r'lbr_A1 at 4 rad is outside its limits \[-2.9671, 2.9671\]'),
     # at the URDF's limit: 2.7e-7 rad past KUKA's 170 degrees, which the driver refuses
-    (2.96706, 'outside the joint limits as KUKA has them'),
+    (2.96706, 'lbr_A1 at 2.967060 rad is outside the joint limits as KUKA has them'),
 ])
-def test_a_goal_outside_the_limits_from_the_start_is_refused_at_start(ros, tmp_path, a1, reason):
+def test_a_goal_outside_the_limits_given_at_start_up_ends_the_node_naming_the_joint(
+        ros, tmp_path, a1, reason):
+    # it was a warning, and the node ran on (a ValueError out of the node: exit 2, one line)
     outside = GOAL.copy()
     outside[0] = a1
-    planner(ros, tmp_path, goal=outside.tolist())
+    with pytest.raises(ValueError, match=reason):
+        planner(ros, tmp_path, goal=outside.tolist())
+
+
+def test_a_planner_given_no_goal_refuses_to_start_until_one_is_set(ros, tmp_path):
+    # the goal's default was all zeros, and a goal lost on the command line sent the arm there
+    node = planner(ros, tmp_path, goal=None)
     steady_states(ros)
     wait_for(lambda: ros.status.get('state') == 'idle', 10, 'planner status')
     time.sleep(0.2)
     response = ros.call('start')
-    assert not response.success and reason in response.message
+    assert not response.success and 'goal parameter is not set' in response.message
+    assert ros.trajectories == []
+    assert node.set_parameters([Parameter('goal', value=GOAL.tolist())])[0].successful
+    assert ros.call('start').success
 
 
 @pytest.mark.parametrize('names, positions, reason', [

@@ -146,6 +146,22 @@ class Arm(ABC):
         batch = self.as_batch(configs)
         return np.all((batch >= self.lower - tol) & (batch <= self.upper + tol), axis=1)
 
+    def joint_outside(self, config: np.ndarray, tol: float = 1e-9) -> int | None:
+        """Return the first joint of config not finite or outside its limits (None: none)."""
+        config = self.as_batch(config)[0]
+        for j, value in enumerate(config):
+            if not (self.lower[j] - tol <= value <= self.upper[j] + tol):
+                return j
+        return None
+
+    def limit_problem(self, config: np.ndarray) -> str:
+        """Return which joint of config is not finite or outside its limits, or '' if none."""
+        j = self.joint_outside(config)
+        if j is None:
+            return ''
+        return (f'{self.joint_names[j]} at {self.as_batch(config)[0, j]:.4g} rad is outside '
+                f'its limits [{self.lower[j]:.4f}, {self.upper[j]:.4f}]')
+
     def random_configurations(self, rng: np.random.Generator, n: int,
                               margin: float = 0.0) -> np.ndarray:
         """

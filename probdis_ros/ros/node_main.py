@@ -32,6 +32,7 @@ from rclpy.exceptions import (
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
+from rclpy.utilities import remove_ros_args
 
 #: [s] the longest the spin waits before it looks whether a signal asked it to end.
 SIGNAL_CHECK = 0.05
@@ -63,6 +64,13 @@ def run_node(name: str, factory: Callable[[], Node], args: list[str] | None = No
     (the arm ran the rest of its path unsupervised).  An error out of a callback halts it
     too before the node goes.
     """
+    stray = remove_ros_args(sys.argv if args is None else args)[1:]
+    if stray:
+        # rclpy ignores them: a goal given as "-p goal:=[...]" without --ros-args was lost,
+        # and the node ran with its defaults
+        print(f'{name}: error: {" ".join(stray)!r} is not a ROS argument: parameters and '
+              f'remappings go after --ros-args (--ros-args -p name:=value)', file=sys.stderr)
+        return 2
     ending = threading.Event()
     options = None
 

@@ -138,6 +138,17 @@ def default_map_file() -> str:
     return os.path.join(home, 'probdis', 'failure_map.json')
 
 
+#: The goal parameter's value until it is set (a double array, so that ros2 param set takes
+#: one): a goal must be given, since a default would send the arm there (upright, all zeros)
+UNSET_GOAL = [math.nan] * 7
+
+
+def _unset(goal) -> bool:
+    """Tell whether a goal parameter's value is UNSET_GOAL (7 NaN)."""
+    goal = np.asarray(goal, dtype=float)
+    return goal.shape == (7,) and bool(np.all(np.isnan(goal)))
+
+
 PARAMETERS = {
     'joint_states_topic': ('/lbr/joint_states', ParameterDescriptor(
         description='sensor_msgs/JointState in (sensor-data QoS)')),
@@ -145,8 +156,9 @@ PARAMETERS = {
                          ParameterDescriptor(description='trajectory_msgs/JointTrajectory out')),
     'joint_names': ([f'lbr_A{i}' for i in range(1, 8)], ParameterDescriptor(
         description='the 7 arm joints, in URDF order (matched by name in joint states)')),
-    'goal': ([0.0] * 7, ParameterDescriptor(
-        description='goal configuration [rad], 7 values within the joint limits')),
+    'goal': (UNSET_GOAL, ParameterDescriptor(
+        description='goal configuration [rad], 7 values within the joint limits (no default: '
+                    '~/start refuses until it is set)')),
     'velocity_scaling': (RUN.velocity_scaling, _float(
         'fraction of the URDF velocity limits (faster than 0.7, the arm in joint impedance '
         "overshoots them and the driver's command guard stops it)", 0.01,
@@ -269,11 +281,14 @@ class PlannerNode(Node):
                                                self.get_parameter('table_clearance').value),
                                          self.get_parameter('object_radius').value)
         self.joint_names = list(self.get_parameter('joint_names').value)
-        problem = self._goal_problem(self.get_parameter('goal').value)
+        goal = self.get_parameter('goal').value
+        problem = self._goal_problem(goal)
         if len(self.joint_names) != 7:
             raise ValueError('joint_names must name 7 joints')
+        if problem and not _unset(goal):
+            raise ValueError(f'goal parameter: {problem}')     # exit 2, as any start-up value
         if problem:
-            self.get_logger().warning(f'goal parameter: {problem}; ~/start will refuse')
+            self.get_logger().warning(f'goal parameter {problem}; ~/start refuses until it is')
         # compile (or load) every kernel a run calls now, not at ~/start or at the first block,
         # where it would hold the executor for seconds while the retreat must be watched
         # (short plans do: the anytime budget only repeats the same kernels)
@@ -420,12 +435,17 @@ class PlannerNode(Node):
 
     def _goal_problem(self, goal) -> str:
         goal = np.asarray(goal, dtype=float)
+        if _unset(goal):
+            return 'is not set: give the 7 joint positions [rad], -p goal:=[a1, ..., a7]'
         if goal.shape != (7,):
             return f'needs 7 values, has {goal.size}'
-        if not np.all(np.isfinite(goal)) or not self.arm.within_limits(goal)[0]:
-            return 'outside the joint limits'
-        if not self.arm.within_limits(goal, tol=-GOAL_INSIDE_LIMITS)[0]:
-            return (f'outside the joint limits as KUKA has them (whole degrees): keep it '
+        outside = self.arm.limit_problem(goal)
+        if outside:
+            return outside
+        j = self.arm.joint_outside(goal, tol=-GOAL_INSIDE_LIMITS)
+        if j is not None:
+            return (f'{self.arm.joint_names[j]} at {goal[j]:.6f} rad is outside the joint '
+                    f'limits as KUKA has them (whole degrees, which the driver keeps): keep it '
                     f'{GOAL_INSIDE_LIMITS:g} rad inside the URDF limits')
         return self.arm.table_problem(goal)
 
