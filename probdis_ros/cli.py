@@ -713,6 +713,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
     """Plan one path on a saved failure map and print it."""
     from probdis_ros.model import arm_for_setting, FailureMap
     from probdis_ros.model.path_cost import path_success_probability
+    from probdis_ros.model.table import ROBOT_TABLE
     from probdis_ros.planning import Method, RRTSettings
     from probdis_ros.planning.seeds import PLANNER, stream
 
@@ -730,6 +731,10 @@ def cmd_plan(args: argparse.Namespace) -> int:
     fmap.c_fail = method.map_c_fail(fmap.c_fail)
     setting = {'point2': '2d', 'point3': '3d', 'pose3': '3d-orient'}[fmap.task_space.value]
     arm = arm_for_setting(setting)
+    _not_negative(args.object_radius, '--object-radius')
+    if setting != '2d' and not args.no_table:
+        # the planner node's default: no plan takes the arm (or the object) through its table
+        arm = arm.on_table(ROBOT_TABLE, args.object_radius)
     ends = []
     for name in ('start', 'goal'):
         config = _joint_values(getattr(args, name), f'--{name}')
@@ -1014,6 +1019,12 @@ def build_parser() -> argparse.ArgumentParser:
                       "map's), hard:Y[:C_HARD] or informed[:IDEAS] (default probabilistic)")
     plan.add_argument('--json', action='store_true', help='print {"path", "cost", '
                       '"success_probability", "plan_time_s"}')
+    plan.add_argument('--no-table', action='store_true', help='iiwa maps: plan as if the arm '
+                      "stood on no table (by default no path takes it below the robot's table "
+                      "top + 5 cm, and a goal below it is refused, as in the planner node)")
+    plan.add_argument('--object-radius', type=float, default=0.0, metavar='R',
+                      help='radius [m] of a ball about the flange that holds the grasped '
+                      'object, kept above the table too (default 0, as the planner node)')
     plan.set_defaults(handler=cmd_plan)
 
     from probdis_ros.planning import DEFAULT_EPSILON, DEFAULT_THRESHOLD, METHODS

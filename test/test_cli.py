@@ -159,6 +159,33 @@ def test_plan_prints_a_path_on_a_saved_map(probdis, tmp_path):
     assert result.returncode == 2 and 'not allowed with' in result.stderr
 
 
+def test_plan_keeps_the_iiwa_above_its_table_as_the_planner_node_does(probdis, tmp_path):
+    # plan took no table: it planned to a goal 7.5 cm below the table top, through it
+    from probdis_ros.model import arm_for_setting, FailureMap
+    from probdis_ros.model.table import ROBOT_TABLE
+
+    arm = arm_for_setting('3d-orient')
+    fmap = FailureMap(arm.task_space)
+    fmap.save(tmp_path / 'map.json')
+    start = ['0', '0.454', '0', '-1.533', '0', '1.155', '0']
+    low = ['0', '2.0', '0', '0', '0', '0', '0']
+    args = ('plan', '--map', str(tmp_path / 'map.json'), '--start', *start, '--goal', *low,
+            '--iterations', '30', '--json')
+    result = probdis(*args, check=False)
+    assert result.returncode == 2 and 'below the table' in result.stderr, result.stderr
+    assert len(json.loads(probdis(*args, '--no-table').stdout)['path']) >= 2
+    high = ['0.5', '0.3', '0', '-1.2', '0', '0.8', '0']
+    path = np.array(json.loads(probdis(*args[:12], *high, '--iterations', '30',
+                                       '--json').stdout)['path'])
+    steps = np.concatenate([a + np.linspace(0, 1, 50)[:, None] * (b - a)
+                            for a, b in zip(path[:-1], path[1:])])
+    # every edge point 5 cm above the top (the clearance); between them, above the top
+    assert arm.on_table(ROBOT_TABLE).lowest_heights(steps).min() > ROBOT_TABLE.height
+    outside = ['4.0', *start[1:]]
+    result = probdis(*args[:4], *outside, *args[11:], check=False)
+    assert result.returncode == 2 and 'A1 at 4 rad is outside its limits' in result.stderr
+
+
 def test_the_robot_experiment_offline_is_deterministic_and_takes_detector_overrides(
         probdis, tmp_path):
     # with joint-state noise and latency too: the run index seeds the noise

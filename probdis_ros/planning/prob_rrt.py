@@ -293,8 +293,9 @@ class ProbRRT:
 
     def _checked(self, config: np.ndarray, name: str) -> np.ndarray:
         config = self.arm.as_batch(config)[0]
-        if not (np.all(np.isfinite(config)) and self.arm.within_limits(config)[0]):
-            raise ValueError(f'{name} configuration is outside the joint limits: {config}')
+        problem = self.arm.limit_problem(config)
+        if problem:
+            raise ValueError(f'{name} configuration is outside the joint limits: {problem}')
         return config
 
     def _nearest(self, tree: Tree, config: np.ndarray, k: int) -> np.ndarray:
