@@ -822,7 +822,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
     result = run_demo(world, args.timeout, quiet=args.json, engine=args.engine,
                       sim_time=args.sim_time, jtc_start=args.jtc_start,
                       extra_mock_args=('-p', f'clock_offset:={args.arm_clock_offset!r}'))
-    summary = {k: result[k] for k in ('success', 'paths', 'failures', 'replan_latency_s')}
+    summary = {k: result[k] for k in ('success', 'paths', 'failures', 'replan_latency_s',
+                                      'bag')}
     if args.json:
         _print_json(summary)
     else:
@@ -1021,7 +1022,7 @@ def build_parser() -> argparse.ArgumentParser:
                       '"success_probability", "plan_time_s"}')
     plan.add_argument('--no-table', action='store_true', help='iiwa maps: plan as if the arm '
                       "stood on no table (by default no path takes it below the robot's table "
-                      "top + 5 cm, and a goal below it is refused, as in the planner node)")
+                      'top + 5 cm, and a goal below it is refused, as in the planner node)')
     plan.add_argument('--object-radius', type=float, default=0.0, metavar='R',
                       help='radius [m] of a ball about the flange that holds the grasped '
                       'object, kept above the table too (default 0, as the planner node)')
@@ -1101,7 +1102,8 @@ def build_parser() -> argparse.ArgumentParser:
                       'computer whose clock is not synchronised (default 0)')
     _jtc_start_argument(demo)
     demo.add_argument('--json', action='store_true',
-                      help='print {"success", "paths", "failures", "replan_latency_s"}')
+                      help='print {"success", "paths", "failures", "replan_latency_s", '
+                      '"bag"}')
     demo.set_defaults(handler=cmd_demo)
 
     rp = sub.add_parser('replay', help='rerun the blocked-motion detector on a rosbag2 bag')

@@ -14,6 +14,7 @@
 
 """The ``probdis`` command line, run as a real process."""
 
+from itertools import pairwise
 import json
 import subprocess
 
@@ -178,7 +179,7 @@ def test_plan_keeps_the_iiwa_above_its_table_as_the_planner_node_does(probdis, t
     path = np.array(json.loads(probdis(*args[:12], *high, '--iterations', '30',
                                        '--json').stdout)['path'])
     steps = np.concatenate([a + np.linspace(0, 1, 50)[:, None] * (b - a)
-                            for a, b in zip(path[:-1], path[1:])])
+                            for a, b in pairwise(path)])
     # every edge point 5 cm above the top (the clearance); between them, above the top
     assert arm.on_table(ROBOT_TABLE).lowest_heights(steps).min() > ROBOT_TABLE.height
     outside = ['4.0', *start[1:]]

@@ -16,6 +16,7 @@
 
 import json
 import os
+from pathlib import Path
 import signal
 import subprocess
 import sys
@@ -184,14 +185,14 @@ def test_demo_disentangles_through_two_processes_and_its_bag_replays_the_same(en
     assert result.returncode == 0, result.stderr[-2000:]
     assert picture.stat().st_size > 10_000          # the scene, the flange path, the blocks
     doc = json.loads(result.stdout.strip().splitlines()[-1])
-    assert list(doc) == ['success', 'paths', 'failures', 'replan_latency_s']
+    assert list(doc) == ['success', 'paths', 'failures', 'replan_latency_s', 'bag']
     assert doc['success'] is True
     assert doc['paths'] >= 2 and doc['failures'] >= 1     # blocked retreats add failures
     assert set(doc['replan_latency_s']) == {'median', 'max'}
     assert 0 <= doc['replan_latency_s']['median'] <= doc['replan_latency_s']['max']
     bags = list((tmp_path / 'probdis' / 'bags').iterdir())
-    assert len(bags) == 1
-    replayed = run(env, 'replay', str(bags[0]), '--json')
+    assert bags == [Path(doc['bag'])]                  # the bag the JSON names, for a script
+    replayed = run(env, 'replay', doc['bag'], '--json')
     assert replayed.returncode == 0, replayed.stderr
     summary = json.loads(replayed.stdout)
     assert (summary['success'], summary['paths'], summary['failures']) == \
