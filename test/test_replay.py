@@ -205,7 +205,8 @@ def test_replay_refuses_bad_bags_clearly(tmp_path):
     with pytest.raises(ReplayError, match='no such bag'):
         replay(tmp_path / 'missing')
     (tmp_path / 'notabag').mkdir()
-    with pytest.raises(ReplayError, match='not a readable rosbag2 bag'):
+    with pytest.raises(ReplayError, match=r'not a readable rosbag2 bag \(a folder without '
+                       r'metadata\.yaml or an \.mcap file\)'):
         replay(tmp_path / 'notabag')
     messages, _, _ = simulated_run()
     write_bag(tmp_path / 'nojs', [m for m in messages if m[1] == TRAJ], 9, StoragePlugin.MCAP)

@@ -70,6 +70,20 @@ def mock(ros, scenario=None, **params):
     return ros.add(MockIiwa(context=ros.context, parameter_overrides=overrides))
 
 
+def test_the_mock_arms_time_starts_at_its_first_tick_not_at_its_construction(ros):
+    # what ran between (start-up's garbage collection) put the first tick 0.1 s behind the
+    # wall clock: it caught up at once and warned that the machine could not keep up
+    overrides = [Parameter('engine', value='kinematic'),
+                 Parameter('scenario', value=str(scenario_path('demo_iiwa')))]
+    node = MockIiwa(context=ros.context, parameter_overrides=overrides)    # not spun yet
+    try:
+        time.sleep(0.3)
+        assert node._steps_due() <= 1          # not 0.3 s of periods at once (10: CATCH_UP)
+        assert abs(node.epoch - time.time()) < 0.05    # its stamps: the wall clock from there
+    finally:
+        node.destroy_node()
+
+
 class SteadyStates:
     """Publishes q from the probe at rate Hz until cancel() (a flag: no timer races)."""
 

@@ -71,6 +71,11 @@ class Bag:
             reader.open()
         except Exception as err:     # rosbags raises several types for a non-bag
             mcap = _mcap_file(self.path)
+            if mcap is None and self.path.is_dir() and \
+                    not (self.path / 'metadata.yaml').exists():
+                # rosbags' own message names the folder as the missing metadata file
+                raise BagError(f'{self.path}: not a readable rosbag2 bag (a folder without '
+                               f'metadata.yaml or an .mcap file)') from None
             if mcap is None:
                 raise BagError(f'{self.path}: not a readable rosbag2 bag ({err})') from None
             self._salvage(mcap, definitions, err)
