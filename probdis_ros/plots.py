@@ -149,6 +149,14 @@ def _dense(path: np.ndarray, step: float = 0.02) -> np.ndarray:
     return densify(np.asarray(path), step)[0]
 
 
+def thin_3d_ticks(ax3) -> None:
+    """Keep four ticks on a 3-D view's x and y axes (their labels ran together)."""
+    from matplotlib.ticker import MaxNLocator
+
+    for axis in (ax3.xaxis, ax3.yaxis):
+        axis.set_major_locator(MaxNLocator(4))
+
+
 def plot_replay(result, out: str | Path, d_dist: float) -> Path:
     """Draw a replay: the L1 joint gap over time with the blocks, and the flange path."""
     import matplotlib
@@ -176,6 +184,7 @@ def plot_replay(result, out: str | Path, d_dist: float) -> Path:
     ax3.set_xlabel('x [m]')
     ax3.set_ylabel('y [m]')
     ax3.set_zlabel('z [m]')
+    thin_3d_ticks(ax3)
     ax3.set_title('flange path')
     fig.suptitle(f'{result.paths} paths, {len(result.blocks)} blocks, '
                  f'{"success" if result.success else "not disentangled"}')

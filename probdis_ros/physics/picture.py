@@ -83,6 +83,7 @@ def plot_scene_run(scene, flange: np.ndarray, failures: list[tuple[np.ndarray, n
     from matplotlib.patches import Polygon
     import matplotlib.pyplot as plt
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+    from probdis_ros.plots import thin_3d_ticks
 
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -122,6 +123,7 @@ def plot_scene_run(scene, flange: np.ndarray, failures: list[tuple[np.ndarray, n
     ax3.set_xlabel('x [m]')
     ax3.set_ylabel('y [m]')
     ax3.set_zlabel('z [m]')
+    thin_3d_ticks(ax3)
     for ax, (a, b), name in zip(views, [('x', 'y'), ('x', 'z')], ['from above', 'from the side']):
         ax.set_xlabel(f'{a} [m]')
         ax.set_ylabel(f'{b} [m]')
@@ -130,7 +132,9 @@ def plot_scene_run(scene, flange: np.ndarray, failures: list[tuple[np.ndarray, n
         ax.grid(alpha=0.3)
     views[1].legend(loc='upper left', bbox_to_anchor=(1.02, 1.0), fontsize=8)
     fig.suptitle(title or scene.name)
-    fig.tight_layout()
+    # room for the 3-D view's z label, which tight_layout does not see (it ran into the
+    # view from above's y label)
+    fig.tight_layout(w_pad=4.0)
     fig.savefig(out, dpi=110)
     plt.close(fig)
     return out
