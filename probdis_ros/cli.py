@@ -791,6 +791,36 @@ def cmd_service(args: argparse.Namespace) -> int:
     return 0 if ok else 1
 
 
+def cmd_param(args: argparse.Namespace) -> int:
+    """Read, list or set the planner's parameters; exit 1 on refusal, 3 on timeout."""
+    from probdis_ros.ros.client import PlannerClient
+    import yaml
+
+    _positive(args.timeout, '--timeout')      # NaN would wait forever
+    with PlannerClient(args.planner) as client:
+        try:
+            if args.action == 'list':
+                print('\n'.join(client.parameter_names(args.timeout)))
+                return 0
+            if args.action == 'get':
+                value = client.parameters([args.name], args.timeout)[args.name]
+                print(json.dumps(value))
+                return 0
+            try:
+                value = yaml.safe_load(args.value)      # as ros2 param set reads it
+            except yaml.YAMLError as err:
+                raise UsageError(f'{args.value!r} is not a value ({err.problem})') from None
+            ok, reason = client.set_parameter(args.name, value, args.timeout)
+        except KeyError as err:
+            print(f'probdis param: {err.args[0]}', file=sys.stderr)
+            return 1
+        except TimeoutError as err:
+            print(f'probdis param: {err}', file=sys.stderr)
+            return 3
+    print(f'set {args.name}' if ok else f'refused: {reason}')
+    return 0 if ok else 1
+
+
 def cmd_status(args: argparse.Namespace) -> int:
     """Print the planner's latest status (JSON)."""
     from probdis_ros.ros.client import PlannerClient
@@ -1085,6 +1115,23 @@ def build_parser() -> argparse.ArgumentParser:
             call.set_defaults(handler=cmd_status)
         else:
             call.set_defaults(handler=cmd_service)
+    param = sub.add_parser('param', help="read or set the planner's parameters (what ros2 "
+                           'param get/set/list do)')
+    actions = param.add_subparsers(dest='action', metavar='ACTION', required=True)
+    for action, text in (('get', 'print one parameter (JSON)'), ('list', 'print their names'),
+                         ('set', 'set one parameter: the planner refuses a bad value with '
+                          'the reason (exit 1)')):
+        sub_action = actions.add_parser(action, help=text)
+        if action != 'list':
+            sub_action.add_argument('name', help='a parameter, e.g. goal or method')
+        if action == 'set':
+            sub_action.add_argument('value', help='YAML, e.g. "[0.3, 0.2, 0, -1.1, 0, 0.6, '
+                                    '0]" or informed')
+        sub_action.add_argument('--planner', default='/probdis_planner',
+                                help='planner node name')
+        sub_action.add_argument('--timeout', type=float, default=10.0,
+                                help='seconds to wait')
+        sub_action.set_defaults(handler=cmd_param)
     demo = sub.add_parser('demo', help='disentangle against the mock iiwa (two processes)')
     demo.add_argument('--scenario', help='physics scene (config/scenes/; default demo_hook) '
                       'or, with --engine kinematic, scenario (config/scenarios/; default '

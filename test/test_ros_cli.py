@@ -63,6 +63,17 @@ def test_service_commands_against_a_running_planner(env, tmp_path):
         assert refused.returncode == 1 and 'no fresh joint state' in refused.stdout
         cleared = run(env, 'reset-map')
         assert cleared.returncode == 0 and 'cleared 0 failures' in cleared.stdout
+        # parameters without the ros2 CLI: the goal can be read and changed between runs
+        assert json.loads(run(env, 'param', 'get', 'goal').stdout) == GOAL.tolist()
+        assert 'goal' in run(env, 'param', 'list').stdout.split()
+        changed = run(env, 'param', 'set', 'goal', '[0.3, 0.2, 0, -1.1, 0, 0.6, 0]')
+        assert changed.returncode == 0, changed.stdout + changed.stderr     # whole numbers too
+        assert json.loads(run(env, 'param', 'get', 'goal').stdout) == \
+            [0.3, 0.2, 0.0, -1.1, 0.0, 0.6, 0.0]
+        refused = run(env, 'param', 'set', 'goal', '[4, 0.2, 0, -1.1, 0, 0.6, 0]')
+        assert refused.returncode == 1 and 'lbr_A1 at 4 rad is outside' in refused.stdout
+        unknown = run(env, 'param', 'get', 'no_such')
+        assert unknown.returncode == 1 and 'no parameter no_such' in unknown.stderr
         stop = run(env, 'stop')
         assert stop.returncode == 0
     finally:

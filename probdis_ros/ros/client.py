@@ -13,7 +13,7 @@
 # limitations under the License.
 
 """
-Command-line access to a running planner without the ros2 CLI: services and status.
+Command-line access to a running planner without the ros2 CLI: services, parameters, status.
 
 Each call uses its own rclpy context and a short-lived node, so it works from a plain
 process (``probdis start``) as well as inside ``probdis demo``.
@@ -26,10 +26,13 @@ import math
 import os
 import time
 
+from rcl_interfaces.msg import ParameterType
+from rcl_interfaces.srv import GetParameters, ListParameters, SetParameters
 import rclpy
 from rclpy.context import Context
 from rclpy.exceptions import NameValidationException
 from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter, parameter_value_to_python
 from rclpy.qos import DurabilityPolicy, QoSProfile
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
@@ -89,8 +92,58 @@ class PlannerClient:
         TimeoutError if the service is not there within timeout [s]; :class:`NoAnswerError`
         if it was called but its answer did not come within timeout of the call.
         """
+        response = self._request(Trigger, service, Trigger.Request(), timeout)
+        return bool(response.success), response.message
+
+    def parameters(self, names: list[str], timeout: float = 10.0) -> dict[str, object]:
+        """Return the planner's parameters by name; KeyError names one it does not have."""
+        response = self._request(GetParameters, 'get_parameters',
+                                 GetParameters.Request(names=names), timeout)
+        if len(response.values) != len(names):      # rclpy answers none for an unknown name
+            raise KeyError(f'{self.planner} has no parameter '
+                           f'{names[0] if len(names) == 1 else "among " + ", ".join(names)}')
+        values = {}
+        for name, value in zip(names, response.values, strict=True):
+            if value.type == ParameterType.PARAMETER_NOT_SET:
+                raise KeyError(f'{self.planner} has no parameter {name}')
+            values[name] = parameter_value_to_python(value)
+        return values
+
+    def parameter_names(self, timeout: float = 10.0) -> list[str]:
+        """Return the names of the planner's parameters, sorted."""
+        response = self._request(ListParameters, 'list_parameters', ListParameters.Request(),
+                                 timeout)
+        return sorted(response.result.names)
+
+    def set_parameter(self, name: str, value: object, timeout: float = 10.0
+                      ) -> tuple[bool, str]:
+        """
+        Set one parameter of the planner; return (accepted, reason).
+
+        Whole numbers are taken as decimals where the parameter holds decimals (a goal of
+        ``[0, 1, ...]``, as ros2 param set would refuse), so the value keeps its type.
+        """
+        current = self.parameters([name], timeout)[name]
+        if isinstance(current, float) and isinstance(value, int) and \
+                not isinstance(value, bool):
+            value = float(value)
+        if isinstance(current, list) and current and isinstance(current[0], float) and \
+                isinstance(value, list):
+            value = [float(v) if isinstance(v, int) and not isinstance(v, bool) else v
+                     for v in value]
+        try:
+            message = Parameter(name, value=value).to_parameter_msg()
+        except (TypeError, ValueError) as err:
+            return False, f'{value!r} is not a parameter value ({err})'
+        response = self._request(SetParameters, 'set_parameters',
+                                 SetParameters.Request(parameters=[message]), timeout)
+        result = response.results[0]
+        return bool(result.successful), result.reason
+
+    def _request(self, kind, service: str, request, timeout: float):
+        """Call ``<planner>/<service>`` of type kind; return its response (see call)."""
         check_timeout(timeout)
-        client = self.node.create_client(Trigger, f'{self.planner}/{service}')
+        client = self.node.create_client(kind, f'{self.planner}/{service}')
         try:
             deadline = time.monotonic() + timeout
             while not client.service_is_ready():
@@ -108,15 +161,14 @@ class PlannerClient:
             # the answer has its own time: a service that came up just before the deadline
             # has not had the time to answer (it did not answer is not it was not called)
             deadline = time.monotonic() + timeout
-            future = client.call_async(Trigger.Request())
+            future = client.call_async(request)
             while not future.done():
                 if time.monotonic() > deadline:
                     raise NoAnswerError(f'{self.planner}/{service} did not answer within '
                                         f'{timeout:g} s; the call may have taken effect '
                                         f'(probdis status tells)')
                 self.executor.spin_once(timeout_sec=0.05)
-            response = future.result()
-            return bool(response.success), response.message
+            return future.result()
         finally:
             self.node.destroy_client(client)
 
