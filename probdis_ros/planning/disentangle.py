@@ -156,8 +156,9 @@ class Disentangler:
     def __post_init__(self) -> None:
         """Validate the goal and create an empty map and the random generator."""
         self.goal = self.arm.as_batch(self.goal)[0].copy()
-        if not (np.all(np.isfinite(self.goal)) and self.arm.within_limits(self.goal)[0]):
-            raise ValueError(f'goal is outside the joint limits: {self.goal}')
+        problem = self.arm.limit_problem(self.goal)
+        if problem:
+            raise ValueError(f'goal is outside the joint limits: {problem}')
         if self.max_paths < 1:
             raise ValueError('max_paths must be at least 1')
         if self.min_retreat < 0:

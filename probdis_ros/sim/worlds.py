@@ -84,9 +84,10 @@ class World:
             value = np.asarray(getattr(self, name), dtype=float).reshape(-1)
             if value.shape != (self.arm.n_joints,) or not np.all(np.isfinite(value)):
                 raise ScenarioError(f'{name} must be {self.arm.n_joints} finite joint values')
-            if not self.arm.within_limits(value)[0]:
+            outside = self.arm.limit_problem(value)
+            if outside:
                 raise ScenarioError(f'{name} is outside the joint limits of the '
-                                    f'{self.arm.name} arm')
+                                    f'{self.arm.name} arm: {outside}')
             problem = self.arm.table_problem(value)
             if problem:
                 raise ScenarioError(f'{name} {problem}')
