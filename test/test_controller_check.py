@@ -90,6 +90,16 @@ def test_the_controllers_start_and_holds_are_read(setting):
     assert 'from its last command' in check.refusal(False)
 
 
+def test_a_command_timeout_is_a_hold_the_desired_start_cannot_see(setting):
+    # JTC's cmd_timeout holds the measured position a while after each trajectory's end
+    check, client, _ = setting
+    check.poll()
+    answer_all(client, {'interpolate_from_desired_state': True, 'cmd_timeout': 0.5,
+                        'constraints.goal_time': 0.0, 'constraints.lbr_A1.trajectory': 0.0})
+    assert check.holds == {'cmd_timeout': 0.5}
+    assert 'cmd_timeout 0.5' in check.refusal(True)
+
+
 def test_a_controller_that_goes_mid_call_is_no_longer_believed(setting):
     check, client, clock = setting
     check.poll()
@@ -99,7 +109,7 @@ def test_a_controller_that_goes_mid_call_is_no_longer_believed(setting):
     clock[0] += POLL
     check.poll()                       # asked again: the controller never answers
     hung = list(client.calls)
-    assert len(hung) == 4
+    assert len(hung) == 5
     clock[0] += POLL
     check.poll()                       # the hung batch is dropped, a new one asked
     assert client.removed == hung

@@ -17,6 +17,7 @@
 
 import numpy as np
 from probdis_ros.motion.jtc import (
+    CommandLimiter,
     FirstOrderFilter,
     JtcTrajectory,
     TrajectoryCommand,
@@ -152,6 +153,21 @@ def test_the_driver_filter_is_first_order_with_its_time_constant():
         out = f(np.ones(1))
     assert out == pytest.approx([1 - np.exp(-0.04 / 0.04)])
     assert FirstOrderFilter(tau=0.0)(np.array([3.0])) == pytest.approx([3.0])
+
+
+def test_the_joint_limiter_ramps_a_step_at_the_velocity_limit_and_keeps_the_limits():
+    # ros2_control's enforce_command_limits: within v_max * period of the last limited
+    # command and within the position limits; a command within them passes unchanged
+    limiter = CommandLimiter(np.array([1.0, 2.0]), np.array([-1.0, -1.0]),
+                             np.array([1.0, 1.0]), period=0.01)
+    limiter.reset(np.zeros(2))
+    assert limiter(np.array([0.005, -0.01])) == pytest.approx([0.005, -0.01])
+    out = [limiter(np.array([0.5, 3.0])) for _ in range(3)]
+    assert [o[0] for o in out] == pytest.approx([0.015, 0.025, 0.035])
+    assert [o[1] for o in out] == pytest.approx([0.01, 0.03, 0.05])
+    for _ in range(100):
+        last = limiter(np.array([0.5, 3.0]))
+    assert last == pytest.approx([0.5, 1.0])       # arrived, and held at the upper limit
 
 
 def test_a_desired_start_continues_the_last_command_where_a_measured_start_steps_back():

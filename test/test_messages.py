@@ -54,6 +54,22 @@ def test_a_command_goes_through_its_message_unchanged_point_by_point():
     assert abs(stamped.stamp - 1796369963.125) < 1e-6
 
 
+def test_a_position_at_a_limit_is_sent_within_the_drivers_limits():
+    # the lbr stack's guard takes A1, A3 and A5's limits as 170 degrees exactly, 2.7e-7 rad
+    # inside the URDF's: a stop held at the URDF's limit would end the FRI session
+    arm = iiwa_arm()
+    positions = np.array([arm.upper, arm.lower, (arm.lower + arm.upper) / 2 + 0.1])
+    command = TrajectoryCommand(np.array([0.1, 0.2, 0.3]), positions)
+    sent = command_from_msg(trajectory_msg(command, JOINTS, arm.lower, arm.upper), JOINTS,
+                            arm.lower, arm.upper).positions
+    driver = math.radians(170.0)
+    assert sent[0, 0] <= driver and sent[0, 2] <= driver and sent[0, 4] <= driver
+    assert sent[1, 0] >= -driver and sent[1, 4] >= -driver
+    assert np.abs(sent[:2] - positions[:2]).max() <= 1.001e-6
+    assert np.array_equal(sent[2], positions[2])        # inside the limits: unchanged
+    assert arm.upper[0] > driver                        # why: the URDF's is beyond it
+
+
 def five_points():
     """Return a valid message of five points with positions, velocities and accelerations."""
     arm = iiwa_arm()

@@ -151,7 +151,8 @@ def test_an_arm_that_lags_more_than_motion_delay_is_not_taken_for_an_echo():
 def test_a_desired_start_never_steps_the_command_where_a_measured_start_does(
         scene, seed, paths):
     # JTC's default starts every new command from the measured state, so at each block its
-    # command steps back by the gap (README, "On the real arm"); from its last command
+    # command steps back by the gap (README, "On the real arm"), which ros2_control's joint
+    # limiter passes on at the velocity limits; from its last command
     # (interpolate_from_desired_state) the command stays within the release's speed
     peaks = {}
     for start in JTC_STARTS:
@@ -159,5 +160,5 @@ def test_a_desired_start_never_steps_the_command_where_a_measured_start_does(
                                       run_settings=RunSettings(jtc_start=start))
         assert episode.failures and 'driver stopped' not in episode.message
         peaks[start] = episode.command_speed_peak, episode.sent_speed_peak
-    assert peaks['measured'][0] > 5.0 and peaks['measured'][1] > 1.5
+    assert peaks['measured'][0] > 5.0 and peaks['measured'][1] <= 1.0 + 1e-9
     assert max(peaks['desired']) <= RELEASE_SCALING + 1e-6

@@ -146,11 +146,42 @@ def test_the_command_guard_stops_the_driver_on_a_speed_the_arm_may_not_reach():
 
 
 def test_the_command_guard_stops_the_driver_on_a_command_past_a_limit():
-    robot, _ = build_robot('kinematic', 'demo_iiwa')
-    beyond = robot.joint_state().position.copy()
-    beyond[0] = ARM.upper[0] + 0.05
-    _, duration = command_to(robot, beyond, 0.5)
-    while robot.stopped is None and robot.time < duration + 1.0:
-        robot.step()
-        assert robot.engine.q[0] <= ARM.upper[0]
-    assert robot.stopped is not None and 'A1 outside its limits' in robot.stopped
+    # without ros2_control's joint limiter (enforce_command_limits false) the command
+    # reaches the driver's guard, which ends the session; with it (the lbr stack's
+    # default) the command is held at the limit and the driver stays up
+    for limiter in (False, True):
+        robot, _ = build_robot('kinematic', 'demo_iiwa', RobotSettings(limiter=limiter))
+        beyond = robot.joint_state().position.copy()
+        beyond[0] = ARM.upper[0] + 0.05
+        _, duration = command_to(robot, beyond, 0.5)
+        while robot.stopped is None and robot.time < duration + 1.0:
+            robot.step()
+            assert robot.engine.q[0] <= ARM.upper[0]
+        if limiter:
+            assert robot.stopped is None and robot.limiter.value[0] == ARM.upper[0]
+        else:
+            assert robot.stopped is not None and 'A1 outside its limits' in robot.stopped
+
+
+def test_the_joint_limiter_ramps_the_step_of_a_new_command_at_the_velocity_limits():
+    # the arm stopped dead by an obstacle while JTC's command runs on; a new command from the
+    # measured state steps JTC's command back by the gap in one period, and without the
+    # limiter the driver's filter passes on a fifth of that per period, above the limits
+    for limiter in (False, True):
+        robot, _ = build_robot('kinematic', 'demo_iiwa', RobotSettings(limiter=limiter))
+        start = robot.joint_state().position.copy()
+        far = start.copy()
+        far[0] = 2.0
+        command_to(robot, far, 0.5)
+        for _ in range(150):
+            robot.step()
+        gap = np.abs(robot.commanded - robot.engine.q).sum()
+        assert gap > 0.3                                # blocked: the command ran on
+        command_to(robot, start, 0.5)
+        for _ in range(30):
+            robot.step()
+        assert robot.command_speed_peak > 5.0           # JTC's own command stepped back
+        if limiter:
+            assert robot.sent_speed_peak <= 1.0 + 1e-9
+        else:
+            assert robot.sent_speed_peak > 1.5

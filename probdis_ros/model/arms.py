@@ -49,10 +49,11 @@ from probdis_ros.model.kinematics import (
 )
 from probdis_ros.model.table import collision_shapes, SHAPE_COLUMNS, Table
 
-#: [rad] how far inside its URDF limits a commanded goal must lie: KUKA's limits are whole
-#: degrees, which the URDF's six decimals round outward by up to 2.7e-7 rad (A1, A3, A5), and
-#: the driver's command guard ends the FRI session on a command past its limits.
-GOAL_INSIDE_LIMITS = 1e-6
+#: [rad] how far inside its URDF limits a goal must lie, and every position the planner node
+#: sends is held: KUKA's limits are whole degrees, which the URDF's six decimals round outward
+#: by up to 2.7e-7 rad (A1, A3, A5), and the driver's command guard ends the FRI session on a
+#: command past its limits.
+DRIVER_LIMIT_INSET = 1e-6
 
 
 class TaskSpace(str, Enum):

@@ -37,8 +37,11 @@ before is instead the controller's last command (``last_commanded_state_``: the 
 update's sample one period ahead, with its position, velocity and acceleration), stamped at
 the previous update's time (``last_commanded_time_``): one period before ``t0``.  The
 command stays continuous: the new trajectory's first sample is exactly what the message's
-first point says, and nothing steps back to the measured position.  After activation JTC
-holds the measured position, and that hold is its last command.  (Where JTC holds by itself,
+first point says, and nothing steps back to the measured position.  After its first
+activation JTC holds the measured position (the lbr stack's command interfaces start as NaN),
+and that hold is its last command; activated again, it holds the command interfaces' last
+value instead (``set_last_command_interface_value_as_state_on_activation``, true by
+default), which may lie where the arm pressed.  (Where JTC holds by itself,
 on a path or goal tolerance violation, it holds the *measured* position, and that becomes
 its last command: the planner does not see that, see the README.)  ``open_loop_control:
 true`` starts from the last command as well (JTC ORs the two).
@@ -299,6 +302,39 @@ class TrajectoryController:
             return self._hold.copy()
         self.last = self.trajectory.sample(now + self.period - self.trajectory.taken_at)
         return self.last[0].copy()
+
+
+class CommandLimiter:
+    """
+    ros2_control's joint limiter between JTC and the driver (``enforce_command_limits``).
+
+    The lbr stack's controller manager enables it (its ``hardware_controllers.yaml``): each
+    period the position command may move at most the URDF's velocity limit times the period
+    from the previous *limited* command, and stays within the position limits.  A command
+    that steps (a measured-start command after a block) reaches the driver as a ramp at the
+    velocity limits; a smooth command within the limits passes unchanged.
+    """
+
+    def __init__(self, velocity_limits: np.ndarray, lower: np.ndarray, upper: np.ndarray,
+                 period: float = 1.0 / CONTROLLER_RATE) -> None:
+        self.step = np.asarray(velocity_limits, dtype=float) * period
+        self.lower = np.asarray(lower, dtype=float)
+        self.upper = np.asarray(upper, dtype=float)
+        self.value: np.ndarray | None = None
+
+    def reset(self, value: np.ndarray) -> None:
+        """Start from value (ros2_control takes the measured position as the first command)."""
+        self.value = np.asarray(value, dtype=float).copy()
+
+    def __call__(self, command: np.ndarray) -> np.ndarray:
+        """Return the command of one period as the limiter passes it on."""
+        command = np.asarray(command, dtype=float)
+        if self.value is None:
+            self.reset(command)
+        low = np.maximum(self.value - self.step, self.lower)
+        high = np.minimum(self.value + self.step, self.upper)
+        self.value = np.clip(command, low, high)
+        return self.value.copy()
 
 
 class FirstOrderFilter:

@@ -18,8 +18,10 @@ The arm as the planner meets it: JTC, the driver's filter, an arm, and what the 
 
 :class:`SimulatedRobot` runs the real stack's command path at the controller rate (100 Hz):
 joint_trajectory_controller (:mod:`probdis_ros.motion.jtc`) samples the newest command one
-period ahead, the lbr stack driver smooths it with its first-order filter, and an *engine*
-moves the arm toward it for one period:
+period ahead, ros2_control's joint limiter keeps it within the velocity limits of the last
+(``enforce_command_limits``, which the lbr stack's controller manager sets; ``limiter``), the
+lbr stack driver smooths it with its first-order filter, and an *engine* moves the arm toward
+it for one period:
 
 * :class:`~probdis_ros.physics.arm.PhysicsIiwa`: MuJoCo in joint impedance (the default of
   the mock): lags, swings around a contact, presses with a force set by its stiffness;
@@ -53,6 +55,7 @@ from typing import Protocol, TYPE_CHECKING
 import numpy as np
 from probdis_ros.model.arms import Arm
 from probdis_ros.motion.jtc import (
+    CommandLimiter,
     CONTROLLER_RATE,
     DEFAULT_JTC_START,
     DRIVER_FILTER_TAU,
@@ -132,6 +135,7 @@ class RobotSettings:
     latency: float = 0.0                    # reported joint states are this old [s]
     echo: bool = False                      # report the command sent, not the arm (open_loop)
     guard: bool = True                      # the driver's command guard stops it on a fault
+    limiter: bool = True                    # ros2_control's joint limiter (CommandLimiter)
     seed: int = 0                           # noise stream
     jtc_start: str = DEFAULT_JTC_START      # JTC's interpolate_from_desired_state: 'desired'
 
@@ -158,7 +162,7 @@ class JointStateSample:
 
 
 class SimulatedRobot:
-    """JTC -> driver filter -> engine, one controller period per :meth:`step`."""
+    """JTC -> joint limiter -> driver filter -> engine, one controller period per :meth:`step`."""
 
     def __init__(self, engine: Engine, start: np.ndarray,
                  settings: RobotSettings | None = None) -> None:
@@ -167,15 +171,21 @@ class SimulatedRobot:
         self.controller = TrajectoryController(self.settings.period, self.settings.jtc_start)
         self.filter = FirstOrderFilter(self.settings.filter_tau, self.settings.period)
         self.rng = np.random.default_rng(self.settings.seed)
+        from probdis_ros.model import iiwa_arm
+        self._limits = iiwa_arm()
+        self.limiter = CommandLimiter(self._limits.velocity_limits, self._limits.lower,
+                                      self._limits.upper, self.settings.period) \
+            if self.settings.limiter else None
         engine.reset(start)
         self.filter.reset(engine.q)
+        if self.limiter is not None:
+            self.limiter.reset(engine.q)
         self.commanded = engine.q.copy()      # JTC's last position command
         self._sent_before = engine.q.copy()   # the driver's command one period earlier
         self.stopped: str | None = None       # why the driver's command guard stopped it
-        from probdis_ros.model import iiwa_arm
-        self._limits = iiwa_arm()
         # the fastest change of a joint's command in one period, over its velocity limit:
-        # JTC's output and the driver's (after its filter); above 1 the command stepped
+        # JTC's output and the driver's (after the limiter and its filter); above 1 the
+        # command stepped
         self.command_speed_peak = 0.0
         self.sent_speed_peak = 0.0
         self._reported: deque[JointStateSample] = deque()
@@ -191,7 +201,7 @@ class SimulatedRobot:
         self.controller.receive(command)
 
     def step(self) -> None:
-        """Run one controller period: JTC update, driver filter, the arm moves."""
+        """Run one controller period: JTC update, joint limiter, driver filter, the arm moves."""
         if self.stopped is not None:        # the driver is down: the arm holds, unreported
             self.engine.advance(self._held, self.settings.period)
             return
@@ -202,7 +212,8 @@ class SimulatedRobot:
                                                 state.velocity)
         self._sent_before = self.filter.value.copy()
         before = self.engine.q.copy()
-        sent = self.filter(self.commanded)
+        limited = self.commanded if self.limiter is None else self.limiter(self.commanded)
+        sent = self.filter(limited)
         self.command_speed_peak = max(self.command_speed_peak,
                                       self._speed_over_limit(self.commanded - previous))
         self.sent_speed_peak = max(self.sent_speed_peak,

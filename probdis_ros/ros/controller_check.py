@@ -21,9 +21,10 @@ planner that models the other start than the controller runs either drives a pre
 back into what blocked it or takes the release of a block for a new block, so ``~/start`` is
 refused when the two differ.  Modelling the last command also needs JTC never to hold by
 itself: on a path tolerance (``constraints.<joint>.trajectory``) or goal time
-(``constraints.goal_time``) violation it holds the *measured* position, which becomes its last
-command unseen by the planner, and the next command would step from there to where the
-planner thinks the command is (into what blocked the arm).  The controller's parameters are
+(``constraints.goal_time``) violation, or ``cmd_timeout`` after a trajectory's end, it holds
+the *measured* position, which becomes its last command unseen by the planner, and the next
+command would step from there to where the planner thinks the command is (into what blocked
+the arm).  The controller's parameters are
 read through its node's parameter service (``<controller_node>/get_parameters``), one call
 per name (a node answers nothing when one name is undeclared), asked again every ``POLL``
 seconds so that a controller started or reconfigured later is seen.
@@ -67,7 +68,7 @@ class ControllerSetting:
         self.holds: dict[str, float] = {}    # its non-zero hold constraints, once read
         self.problem = 'not asked yet'       # why the value is not known
         self.skipped = not self.controller_node     # controller_node '': the user opted out
-        self._names = list(STARTS) + ['constraints.goal_time'] + [
+        self._names = list(STARTS) + ['constraints.goal_time', 'cmd_timeout'] + [
             f'constraints.{joint}.trajectory' for joint in joints]
         self._asked_at = -float('inf')
         self._answers: dict[str, bool | float | None] = {}
@@ -163,8 +164,9 @@ class ControllerSetting:
                     f'starting')
         if planner_value and self.holds:
             named = ', '.join(f'{n} {v:g}' for n, v in self.holds.items())
-            return (f'joint_trajectory_controller holds the measured position by itself on '
-                    f'a violation of {named} ({self.controller_node}), and a planner that '
+            return (f'joint_trajectory_controller holds the measured position by itself '
+                    f'(on a tolerance violation, or cmd_timeout after a trajectory ends) '
+                    f'with {named} ({self.controller_node}), and a planner that '
                     f'models its last command would not see it: with '
                     f'{PARAMETER} set these to 0 (README, "On the real arm"); not starting')
         return ''

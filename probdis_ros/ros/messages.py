@@ -24,9 +24,11 @@ itself, limits, time and jumps, are :mod:`probdis_ros.motion.state_check`).
 from __future__ import annotations
 
 from array import array
+from dataclasses import replace
 
 from builtin_interfaces.msg import Duration, Time
 import numpy as np
+from probdis_ros.model.arms import DRIVER_LIMIT_INSET
 from probdis_ros.motion.jtc import TrajectoryCommand
 from probdis_ros.motion.state_check import (  # noqa: F401 (BadJointStateError: re-exported)
     BadJointStateError,
@@ -64,14 +66,22 @@ def to_seconds(d: Duration) -> float:
     return d.sec + d.nanosec * 1e-9
 
 
-def trajectory_msg(command: TrajectoryCommand, joint_names: list[str]) -> JointTrajectory:
+def trajectory_msg(command: TrajectoryCommand, joint_names: list[str],
+                   lower: np.ndarray | None = None,
+                   upper: np.ndarray | None = None) -> JointTrajectory:
     """
     Build a JointTrajectory of every joint; fields a point lacks are left empty.
+
+    With the arm's limits, every position is held ``DRIVER_LIMIT_INSET`` inside them.
 
     Built column by column (one conversion per field, arrays the message takes as they
     are): a command has a point every controller period, 1,300 for a 13 s motion, and
     building them value by value held the executor for 26-58 ms.
     """
+    if lower is not None and upper is not None:     # a stop at a limit: within the driver's
+        command = replace(command, positions=np.clip(
+            command.positions, np.asarray(lower) + DRIVER_LIMIT_INSET,
+            np.asarray(upper) - DRIVER_LIMIT_INSET))
     msg = JointTrajectory()
     msg.joint_names = list(joint_names)
     if command.stamp > 0:           # JTC starts it then (a desired start), else when taken

@@ -93,6 +93,9 @@ class MockIiwa(Node):
         p('noise', 0.0, _describe('std. dev. of joint-state noise [rad]', 0.0, 0.1))
         p('latency', 0.0, _describe('delay of published joint states [s]', 0.0, 1.0))
         p('echo', False, _describe('report the commanded position (a driver in open loop)'))
+        p('enforce_command_limits', True, _describe(
+            "the controller manager's joint limiter between JTC and the driver (the lbr "
+            "stack's default): each period's command within the velocity limits of the last"))
         p('interpolate_from_desired_state', DEFAULT_JTC_START == 'desired', _describe(
             "joint_trajectory_controller's: start each new command from the last one (true) "
             'or from the measured state (false, its default)'))
@@ -124,6 +127,7 @@ class MockIiwa(Node):
         settings, physics = with_faults(
             {name: value(name) for name in FAULTS},
             RobotSettings(period=1.0 / value('rate'), echo=value('echo'), seed=value('seed'),
+                          limiter=value('enforce_command_limits'),
                           jtc_start='desired' if value('interpolate_from_desired_state')
                           else 'measured'))
         world = value('scene') if value('engine') == 'physics' else value('scenario')

@@ -54,7 +54,7 @@ import time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 import numpy as np
 from probdis_ros.model import FailureMap, FailureMapError, iiwa_arm
-from probdis_ros.model.arms import GOAL_INSIDE_LIMITS
+from probdis_ros.model.arms import DRIVER_LIMIT_INSET
 from probdis_ros.model.failure_map import set_aside, write_document
 from probdis_ros.model.table import ROBOT_TABLE, Table
 from probdis_ros.motion.detector import DetectorSettings, MotionWatch
@@ -442,11 +442,11 @@ class PlannerNode(Node):
         outside = self.arm.limit_problem(goal)
         if outside:
             return outside
-        j = self.arm.joint_outside(goal, tol=-GOAL_INSIDE_LIMITS)
+        j = self.arm.joint_outside(goal, tol=-DRIVER_LIMIT_INSET)
         if j is not None:
             return (f'{self.arm.joint_names[j]} at {goal[j]:.6f} rad is outside the joint '
                     f'limits as KUKA has them (whole degrees, which the driver keeps): keep it '
-                    f'{GOAL_INSIDE_LIMITS:g} rad inside the URDF limits')
+                    f'{DRIVER_LIMIT_INSET:g} rad inside the URDF limits')
         return self.arm.table_problem(goal)
 
     def _run_settings(self, changes: dict | None = None) -> RunSettings:
@@ -882,7 +882,7 @@ class PlannerNode(Node):
                     f"states' stamps): stamped commands are moved onto the arm's clock "
                     f'(synchronise the two clocks)', once=True)
             command = replace(command, stamp=command.stamp - offset)
-        return trajectory_msg(command, self.joint_names)
+        return trajectory_msg(command, self.joint_names, self.arm.lower, self.arm.upper)
 
     @property
     def active(self) -> bool:
