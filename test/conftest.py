@@ -14,6 +14,8 @@
 
 """Shared helpers: run the real ``probdis`` command as a user would."""
 
+import itertools
+import os
 from pathlib import Path
 import shutil
 import subprocess
@@ -22,6 +24,17 @@ import sys
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
+
+#: DDS domains for tests: a fresh one per use, from this run's ROS_DOMAIN_ID (else the pid),
+#: within 1-101 (never 0, where a robot's stack usually runs; above 101 the ports fall among
+#: Linux's ephemeral ones)
+_DOMAIN_BASE = int(os.environ.get('ROS_DOMAIN_ID') or os.getpid() * 7)
+_DOMAINS = itertools.count()
+
+
+def next_domain() -> int:
+    """Return a DDS domain no other test of this run is using (1-101, cycling)."""
+    return 1 + (_DOMAIN_BASE + next(_DOMAINS)) % 101
 
 
 def probdis_command() -> list[str]:

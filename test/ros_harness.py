@@ -21,12 +21,12 @@ that publishes joint states and records what the planner commands and reports.
 
 from __future__ import annotations
 
-import itertools
 import json
 import os
 import threading
 import time
 
+from conftest import next_domain
 import numpy as np
 from probdis_ros.ros.client import REPLY_MATCH
 import rclpy
@@ -40,7 +40,6 @@ from trajectory_msgs.msg import JointTrajectory
 
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 JOINTS = [f'lbr_A{i}' for i in range(1, 8)]
-_DOMAINS = itertools.count((os.getpid() * 7) % 60 + 100)
 
 
 def wait_for(predicate, timeout: float = 10.0, what: str = 'condition') -> None:
@@ -56,7 +55,7 @@ class RosTest:
     """A context of its own, nodes spinning in a thread, a probe to talk to the planner."""
 
     def __init__(self) -> None:
-        self.domain = next(_DOMAINS) % 230
+        self.domain = next_domain()
         self.context = Context()
         rclpy.init(context=self.context, domain_id=self.domain)
         self.executor = SingleThreadedExecutor(context=self.context)
@@ -125,7 +124,9 @@ class RosTest:
     def close(self) -> None:
         """Stop spinning, destroy the nodes, shut the context down."""
         self.executor.shutdown(timeout_sec=2.0)
+        # spin returns once it sees the shutdown: no callback may be running when the nodes
+        # go (rclpy's shutdown does not wait for one, ros2/rclpy#968)
+        self.thread.join(timeout=5.0)
         for node in self.nodes:
             node.destroy_node()
         self.context.try_shutdown()
-        self.thread.join(timeout=5.0)

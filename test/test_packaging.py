@@ -29,7 +29,7 @@ import sysconfig
 import time
 
 from catkin_pkg.package import parse_package
-from conftest import copy_source_tree, ROOT, run_probdis
+from conftest import copy_source_tree, next_domain, ROOT, run_probdis
 import probdis_ros
 import pytest
 
@@ -77,7 +77,7 @@ def test_colcon_build_installs_the_executable_and_the_share_files(tmp_path):
     assert Path(info['share']) == share
     # ros2 run probdis_ros planner_node, without the ros2 CLI: the installed executable
     node = install / 'probdis_ros' / 'lib' / 'probdis_ros' / 'planner_node'
-    env['ROS_DOMAIN_ID'] = str((os.getpid() * 11) % 60 + 100)
+    env['ROS_DOMAIN_ID'] = str(next_domain())
     started = subprocess.Popen(
         ['bash', '-c', f'source {install}/setup.bash && exec {node} --ros-args --params-file '
                        f'{share}/config/planner.yaml -p map_file:={tmp_path}/map.json'],

@@ -21,6 +21,7 @@ from pathlib import Path
 import subprocess
 import sys
 
+from conftest import next_domain
 import numpy as np
 from probdis_ros.physics.episode import run_physics_episode
 import pytest
@@ -66,7 +67,7 @@ def test_probdis_sim_engine_physics_prints_json_and_draws_the_scene(tmp_path):
 @pytest.mark.ros
 def test_a_demo_on_simulated_time_disentangles_and_records_in_simulated_time(tmp_path):
     env = dict(os.environ, ROS_HOME=str(tmp_path),
-               ROS_DOMAIN_ID=str((os.getpid() * 7) % 80 + 110))
+               ROS_DOMAIN_ID=str(next_domain()))
     done = subprocess.run([sys.executable, '-m', 'probdis_ros.cli', 'demo', '--sim-time',
                            '--json'], capture_output=True, text=True, timeout=400, env=env,
                           cwd=ROOT)

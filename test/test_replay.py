@@ -201,6 +201,30 @@ def test_a_command_recorded_before_the_first_joint_state_starts_from_the_first_o
     assert np.linalg.norm(result.blocks[0].x - iiwa_arm().fk(stop).positions[0]) < 0.02
 
 
+def test_a_run_stopped_as_not_executed_is_not_replayed_as_disentangled(tmp_path):
+    # the live run stops when a path is never followed; its stop comes before the status
+    # that says so, and replayed as a new path that ran to its end, it counted as success
+    arm = iiwa_arm()
+    start = WORLD.start
+    away = start + np.array([0.4, -0.2, 0.0, 0.3, 0.0, -0.2, 0.5])
+    path = time_path(np.array([start, away]), arm.velocity_limits, 0.5)
+    stop = time_path(np.array([start, start + (away - start) * 0.2]), arm.velocity_limits, 0.5)
+    messages = [(int(1e9), JS, js_message(JOINTS, start, 1.0)),
+                (int(1.05e9), TRAJ, traj_message(path, JOINTS))]
+    t, stop_sent = 0.05, None
+    while t < 6.0:
+        t += 1.0 / RATE
+        if stop_sent is None and t > 0.05 + 2.5:         # past START_WAIT: stopped live
+            stop_sent = t
+            messages.append((int((1.0 + t) * 1e9) + 1, TRAJ, traj_message(stop, JOINTS)))
+        q = start if stop_sent is None else stop.at(min(t - stop_sent, stop.duration))
+        messages.append((int((1.0 + t) * 1e9), JS, js_message(JOINTS, q, 1.0 + t)))
+    write_bag(tmp_path / 'bag', sorted(messages, key=lambda m: m[0]), *FORMATS[0])
+    result = replay(tmp_path / 'bag')
+    assert any('nothing executed the command' in p for p in result.problems)
+    assert result.paths == 1 and not result.success and result.blocks == []
+
+
 def test_replay_refuses_bad_bags_clearly(tmp_path):
     with pytest.raises(ReplayError, match='no such bag'):
         replay(tmp_path / 'missing')

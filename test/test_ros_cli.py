@@ -22,7 +22,7 @@ import subprocess
 import sys
 import time
 
-from conftest import probdis_command
+from conftest import next_domain, probdis_command
 from probdis_ros.resources import scenario_path
 from probdis_ros.ros.robot_experiment import valid
 from probdis_ros.sim.worlds import load_world
@@ -35,8 +35,7 @@ GOAL = load_world(scenario_path('demo_iiwa')).goal
 
 @pytest.fixture
 def env():
-    domain = (os.getpid() * 13) % 60 + 160
-    return dict(os.environ, ROS_DOMAIN_ID=str(domain),
+    return dict(os.environ, ROS_DOMAIN_ID=str(next_domain()),
                 ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
 
 
@@ -185,6 +184,7 @@ def test_the_demo_takes_a_start_whose_answer_was_lost_from_the_status(env, monke
         alive.kill()
         alive.wait(10)
         executor.shutdown()
+        spinner.join(timeout=5.0)          # no callback running when the node goes
         node.destroy_node()
         context.try_shutdown()
 

@@ -302,6 +302,10 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
         elif verdict is Verdict.NOT_EXECUTED:
             result.problems.append(f'{t:.3f} s: {detector.reason}: nothing executed the command')
             detector = None
+            # the live run stops here: its next command is the stop, recorded before the
+            # status that says so (taken for a new path, a stop that ran to its end was
+            # counted as a path done: a run stopped live replayed as disentangled)
+            ended = True
         elif verdict is Verdict.BLOCKED:
             # the live run's rule: the failure is where the block began, moving the way the
             # command moved then; a blocked retreat is a block too
