@@ -123,14 +123,15 @@ class PlannerClient:
         Whole numbers are taken as decimals where the parameter holds decimals (a goal of
         ``[0, 1, ...]``, as ros2 param set would refuse), so the value keeps its type.
         """
+        def decimal(v: object) -> object:
+            return float(v) if isinstance(v, int) and not isinstance(v, bool) else v
+
         current = self.parameters([name], timeout)[name]
-        if isinstance(current, float) and isinstance(value, int) and \
-                not isinstance(value, bool):
-            value = float(value)
-        if isinstance(current, list) and current and isinstance(current[0], float) and \
+        if isinstance(current, float):
+            value = decimal(value)
+        elif isinstance(current, list) and current and isinstance(current[0], float) and \
                 isinstance(value, list):
-            value = [float(v) if isinstance(v, int) and not isinstance(v, bool) else v
-                     for v in value]
+            value = [decimal(v) for v in value]
         try:
             message = Parameter(name, value=value).to_parameter_msg()
         except (TypeError, ValueError) as err:
