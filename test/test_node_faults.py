@@ -796,6 +796,41 @@ def test_on_simulated_time_the_clock_never_reads_before_a_joint_state_taken(ros,
     assert node._now() == pytest.approx(1000.3)
 
 
+def test_on_simulated_time_a_starved_executor_reads_the_clock_the_simulation_is_at(ros, tmp_path):
+    # an executor kept from running (a plan holding the GIL, a loaded machine) resumes with
+    # the /clock it took last: a command timed by it began, for the detector, before the arm
+    # took it (a fast path read as not executed: 1 run in 20 of the replay test under load)
+    node = planner(ros, tmp_path, use_sim_time=True, state_timeout=0.5)
+    clock_pub = ros.probe.create_publisher(Clock, '/clock', 10)
+    sim = [1000.0]
+    running = threading.Event()
+    running.set()
+
+    def simulate():                       # the simulation runs on, in a thread of its own
+        while running.is_set():
+            sim[0] += 0.005
+            clock_pub.publish(Clock(clock=Time(sec=int(sim[0]),
+                                               nanosec=round(sim[0] % 1 * 1e9))))
+            time.sleep(0.005)
+    simulator = threading.Thread(target=simulate, daemon=True)
+    simulator.start()
+    try:
+        wait_for(lambda: node.sim_clock, 5, 'the clock')
+        readings = []
+
+        def starve():                     # in the executor: nothing else runs meanwhile
+            starver.cancel()
+            time.sleep(0.3)
+            readings.append((node._now(), sim[0]))
+        starver = ros.probe.create_timer(0.05, starve)
+        wait_for(lambda: readings, 5, 'the starved callback')
+    finally:
+        running.clear()
+        simulator.join()
+    now, simulated = readings[0]
+    assert simulated - 0.05 < now <= simulated + 1e-9, (now, simulated)
+
+
 def test_on_simulated_time_start_needs_a_running_clock_and_a_run_stops_with_it(ros, tmp_path):
     node = planner(ros, tmp_path, use_sim_time=True, state_timeout=0.5, plan_time=5.0)
     Stream(ros, stamped=False)                   # judged at the node's (simulated) clock

@@ -87,8 +87,9 @@ from rcl_interfaces.msg import (
 )
 from rclpy.clock import Clock, ClockType
 from rclpy.duration import Duration
+from rclpy.exceptions import InvalidHandle
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, qos_profile_sensor_data, QoSProfile
+from rclpy.qos import DurabilityPolicy, qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState
@@ -312,10 +313,13 @@ class PlannerNode(Node):
         # the arm's motion while no run drives it (something else would be moving it)
         self.motion_watch = MotionWatch(self.get_parameter('stall_time').value)
         self.own_motion_until = -np.inf     # when this node's last command has run out
-        # with use_sim_time: the last /clock and the wall time it last advanced
+        # with use_sim_time: the last /clock and the wall time it last advanced (best effort,
+        # as rclpy's own: it matches every /clock publisher, and holds the newest alone)
         self.sim_clock, self.sim_clock_advanced = 0, -np.inf
-        if self.use_sim_time:
-            self.create_subscription(ClockMsg, '/clock', self._on_clock, 10)
+        self.clock_sub = self.create_subscription(
+            ClockMsg, '/clock', self._on_clock,
+            QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)) \
+            if self.use_sim_time else None
         self.measured: np.ndarray | None = None
         self.measured_velocity: np.ndarray | None = None
         self.measured_at = -np.inf
@@ -565,18 +569,37 @@ class PlannerNode(Node):
 
     def _now(self) -> float:
         """
-        Return the node's time [s]; on simulated time never before the newest joint state.
+        Return the node's time [s]; on simulated time the newest /clock DDS has received.
 
-        A busy executor falls behind on /clock as on the joint states; a command timed by a
-        /clock older than a state already taken (measured at its stamp) began, for the
-        detector, before the arm's time it was sent at (a fast path then read as not
-        executed), and before that state in the recording (a replay fed it to the command).
+        A busy executor falls behind on /clock as on the joint states; a command timed by an
+        old /clock began, for the detector, before the arm's time it was sent at (a fast path
+        then read as not executed), and before a state already taken (measured at its stamp)
+        in the recording (a replay fed it to the command): so never before that state either.
         """
         now = self.get_clock().now().nanoseconds * 1e-9
-        if self.use_sim_time and \
-                0.0 < self.measured_at - now <= self.get_parameter('state_timeout').value:
+        if not self.use_sim_time:
+            return now
+        self._take_waiting_clock()
+        now = max(now, self.sim_clock * 1e-9)
+        if 0.0 < self.measured_at - now <= self.get_parameter('state_timeout').value:
             return self.measured_at
         return now
+
+    def _take_waiting_clock(self) -> None:
+        """
+        Take a /clock that DDS holds and the executor has not yet handed to its callback.
+
+        An executor kept from running (a plan holding the GIL, a loaded machine) resumes
+        with the /clock it took last, while the simulation has run on: a command timed by
+        that clock began, for the detector, up to that long before the arm took it (a fast
+        path read as not executed).  DDS keeps receiving meanwhile; its newest is the time.
+        """
+        try:
+            with self.clock_sub.handle:
+                while (taken := self.clock_sub.handle.take_message(ClockMsg, False)):
+                    self._on_clock(taken[0])
+        except InvalidHandle:       # the node is being destroyed
+            pass
 
     def _receive_time(self, info: dict) -> float:
         """
