@@ -831,6 +831,39 @@ def test_on_simulated_time_a_starved_executor_reads_the_clock_the_simulation_is_
     assert simulated - 0.05 < now <= simulated + 1e-9, (now, simulated)
 
 
+def test_the_longest_the_executor_was_kept_from_running_in_a_run_is_reported(ros, tmp_path):
+    # a busy machine delays every block's detection by as long as states wait in the queue:
+    # the user must be able to see it (status, and a warning in the log)
+    planner(ros, tmp_path, plan_time=0.0)
+    stream = Stream(ros, stamped=True)
+    streaming = threading.Event()
+    streaming.set()
+
+    def publish():                         # the driver publishes on, in a thread of its own
+        while streaming.is_set():
+            ros.js_pub.publish(stream.message())
+            time.sleep(0.01)
+    driver = threading.Thread(target=publish, daemon=True)
+    stream.cancel()
+    driver.start()
+    try:
+        wait_for(lambda: ros.call('start').success, 20, 'start')
+        starved = []
+
+        def starve():
+            starver.cancel()
+            time.sleep(0.3)
+            starved.append(True)
+        starver = ros.probe.create_timer(0.01, starve)
+        wait_for(lambda: starved, 5, 'the starved callback')
+        ros.call('stop')
+        wait_for(lambda: finished(ros), 10, 'the stop')
+    finally:
+        streaming.clear()
+        driver.join()
+    assert 0.25 < ros.status['executor_stall_max_s'] < 1.0, ros.status
+
+
 def test_on_simulated_time_start_needs_a_running_clock_and_a_run_stops_with_it(ros, tmp_path):
     node = planner(ros, tmp_path, use_sim_time=True, state_timeout=0.5, plan_time=5.0)
     Stream(ros, stamped=False)                   # judged at the node's (simulated) clock

@@ -121,6 +121,11 @@ CLOCK_STALL = 2.0
 HALT_WAIT = 3.5
 #: [s] a clock offset to the arm's beyond this is said (once) when a command is stamped
 CLOCK_OFFSET_SAID = 0.05
+#: [s] the node's timer period: it feeds the run the clock's ticks and watches the executor
+TICK = 0.01
+#: [s] an executor kept from running longer than this during a run is said: blocks are
+#: detected that much later, and the arm presses on meanwhile (5 joint states at 100 Hz)
+STALL_SAID = 0.05
 
 
 def _float(text: str, low: float, high: float) -> ParameterDescriptor:
@@ -324,6 +329,8 @@ class PlannerNode(Node):
         self.measured_velocity: np.ndarray | None = None
         self.measured_at = -np.inf
         self.run: Run | None = None
+        self.stall_max = 0.0          # [s] the longest the executor stalled in the run
+        self.ticked_at = time.monotonic()
         self._ended_run: Run | None = None
         self.plan_future: Future | None = None
         self.io = ThreadPoolExecutor(max_workers=1, thread_name_prefix='probdis_io')
@@ -373,7 +380,7 @@ class PlannerNode(Node):
         self.create_service(Trigger, '~/reset_map', self._on_reset_map)
         # on the wall clock: with use_sim_time the run's timeouts read the node's (simulated)
         # clock in the tick, and a /clock that stops must still be noticed
-        self.create_timer(0.01, self._tick, clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self.create_timer(TICK, self._tick, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.create_timer(1.0, self._publish_diagnostics)
         self._publish_status()
         self.get_logger().info(f'{NODE_NAME} ready: {len(self.fmap)} failures in the map')
@@ -702,6 +709,7 @@ class PlannerNode(Node):
         running = self.run.trajectory if keep else None
         running_sent_at = self.run.sent_at if keep else None
         self.run = Run(self.arm, loop, settings, clock=self._now)
+        self.stall_max = 0.0
         self.plan_future = None
         self._open_bag()
         start = self.measured.copy()
@@ -960,6 +968,7 @@ class PlannerNode(Node):
             self._save_map()
 
     def _tick(self) -> None:
+        self._note_stall()
         now = self._now()
         if self.recorder_close_at is not None and now >= self.recorder_close_at:
             self._close_bag()
@@ -990,6 +999,25 @@ class PlannerNode(Node):
                 self._guarded(self.run.plan_failed, err)
             else:
                 self._guarded(self.run.on_plan, path)
+
+    def _note_stall(self) -> None:
+        """
+        Keep the longest the executor was kept from running during the run, and say it.
+
+        The timer runs every TICK on the wall clock unless something holds the executor (a
+        loaded machine, a long callback): the joint states wait meanwhile, and every block
+        is detected that much later while the arm presses on.
+        """
+        ticked_at, self.ticked_at = self.ticked_at, time.monotonic()
+        stall = self.ticked_at - ticked_at - TICK
+        if not self.active:
+            return
+        self.stall_max = max(self.stall_max, stall)
+        if stall > STALL_SAID:
+            self.get_logger().warning(
+                f'this node could not run for {stall:.3f} s: joint states waited, and a block '
+                f'is detected that much later while the arm presses on (is this machine '
+                f'overloaded?)', throttle_duration_sec=5.0)
 
     def _check_graph(self) -> None:
         """Stop a run whose commands nobody executes; warn of a namesake once."""
@@ -1063,7 +1091,8 @@ class PlannerNode(Node):
                       'last_replan_latency_s': None, 'replan_latencies_s': [],
                       'outcome': '', 'message': 'ready'}
         failures = status.get('failures', 0) if self.run is not None else len(self.fmap)
-        return {**status, 'failures': failures, 'bag': self.bag_path, 'errors': self._errors()}
+        return {**status, 'failures': failures, 'executor_stall_max_s': self.stall_max,
+                'bag': self.bag_path, 'errors': self._errors()}
 
     def _errors(self) -> list[str]:
         """Return the file faults in effect: recording, map persistence."""
