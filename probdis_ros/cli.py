@@ -925,7 +925,8 @@ def cmd_replay(args: argparse.Namespace) -> int:
         _print_json(result.summary())
         return status
     print(f'{args.bag}: {result.runs} run(s), {result.paths} path(s), {len(result.blocks)} '
-          f'block(s), {"disentangled" if result.success else "not disentangled"}')
+          f'block(s), {"disentangled" if result.success else "not disentangled"}; peak gap '
+          f'{result.peak_gap:.3f} rad (motion_delay {result.settings.motion_delay:g} s)')
     for block in result.blocks:
         x = ', '.join(f'{v:.3f}' for v in block.x)
         during = 'a retreat' if block.retreat else 'a path'
@@ -1097,14 +1098,17 @@ def build_parser() -> argparse.ArgumentParser:
                      'lowest_m shows how low the arm went)')
     sim.set_defaults(handler=cmd_sim)
 
-    for name, text in (('planner', 'run the planner node (ROS arguments pass through)'),
-                       ('mock', 'run the mock iiwa node (ROS arguments pass through)')):
+    for name, text, example in (
+            ('planner', 'run the planner node (ROS arguments pass through)',
+             '--ros-args --params-file config/planner.yaml -p "goal:=[...]"'),
+            ('mock', 'run the mock iiwa node (ROS arguments pass through)',
+             '--ros-args -p scene:=robot_maze')):
         node = sub.add_parser(name, help=text)
         node.add_argument('ros_args', nargs='*', metavar='--ros-args ...',
-                          help='ROS arguments, e.g. --ros-args --params-file planner.yaml')
+                          help=f'ROS arguments, e.g. {example}')
         node.set_defaults(handler=cmd_node)
     for name, text in (('start', 'start a disentangling (~/start)'),
-                       ('stop', 'stop now and hold (~/stop)'),
+                       ('stop', 'stop: the arm decelerates to rest (~/stop)'),
                        ('reset-map', 'clear the failure map (~/reset_map)'),
                        ('status', "print the planner's status")):
         call = sub.add_parser(name, help=text)

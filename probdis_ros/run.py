@@ -86,9 +86,9 @@ from probdis_ros.planning.disentangle import Disentangler, State
 #: What a run says when the joint states echo the command (README "Pointing it at the real arm").
 ECHO_MESSAGE = ('joint states follow the command exactly as the driver sends it: the driver '
                 'reports the commanded position, not the measured one, so no block could be '
-                'seen. In the '
-                'lbr stack set open_loop: false for JOINT_IMPEDANCE_CONTROL (releases from '
-                'December 2024 do it themselves)')
+                'seen. Use an lbr_fri_ros2_stack release from December 2024 on (PRs #220 and '
+                '#239), which measures in JOINT_IMPEDANCE_CONTROL; do not set open_loop: false '
+                'on an older one: its PID loop winds the command up against a blocked arm')
 
 
 #: A stop from the measured state of an arm off its command carries it on at its measured

@@ -151,8 +151,8 @@ def test_an_arm_that_lags_more_than_motion_delay_is_not_taken_for_an_echo():
 def test_a_desired_start_never_steps_the_command_where_a_measured_start_does(
         scene, seed, paths):
     # JTC's default starts every new command from the measured state, so at each block its
-    # command steps back by the gap (README, "On the real arm"), which ros2_control's joint
-    # limiter passes on at the velocity limits; from its last command
+    # command steps back by the gap (README, "Pointing it at the real arm"), which
+    # ros2_control's joint limiter passes on at the velocity limits; from its last command
     # (interpolate_from_desired_state) the command stays within the release's speed
     peaks = {}
     for start in JTC_STARTS:

@@ -191,6 +191,24 @@ def test_joint_states_held_up_in_delivery_are_dated_by_their_stamps(tmp_path):
     assert result.paths == 1 and result.blocks == [] and result.success, result.problems
 
 
+def test_the_peak_gap_of_a_free_move_is_least_at_the_arms_own_lag(tmp_path):
+    # README: motion_delay is measured on the arm by replaying a free move with several
+    arm = iiwa_arm()
+    path = np.array([WORLD.start, WORLD.start + np.array([0.8, -0.4, 0.0, 0.6, 0.0, -0.5, 1.2])])
+    timed = time_path(path, arm.velocity_limits, 0.5)
+    lag = 0.08
+    messages = [(int(1e9), JS, js_message(JOINTS, path[0], 1.0)),
+                (int(1.05e9), TRAJ, traj_message(timed, JOINTS))]
+    for t in np.arange(0.05, timed.duration + 1.0, 1.0 / RATE):
+        messages.append((int((1.0 + t) * 1e9), JS,
+                         js_message(JOINTS, timed.at(max(t - 0.05 - lag, 0.0)), 1.0 + t)))
+    write_bag(tmp_path / 'bag', messages, *FORMATS[0])
+    peaks = {delay: replay(tmp_path / 'bag', overrides={'motion_delay': delay}).peak_gap
+             for delay in (0.0, 0.04, lag, 0.12, 0.16)}
+    assert min(peaks, key=peaks.get) == lag, peaks
+    assert peaks[lag] < 0.2 * peaks[0.0], peaks
+
+
 def test_a_command_recorded_before_the_first_joint_state_starts_from_the_first_one(tmp_path):
     messages, stop, _ = simulated_run()
     assert messages[0][1] == JS and messages[1][1] == TRAJ

@@ -40,6 +40,8 @@ def gate() -> StateCheck:
     (NAMES, [1e6, *Q[1:]], 'A1 at 1e+06 rad is outside'),
     ([*NAMES, 'lbr_A1'], [*Q, 0.0], 'lbr_A1 is named twice'),
     (NAMES[:6], Q[:6], 'missing joints lbr_A7'),
+    # a driver of another name space: what it names tells the user what to set
+    ([f'iiwa_joint_{i}' for i in range(1, 8)], Q, 'it names iiwa_joint_1, iiwa_joint_2'),
     (NAMES, [np.nan, *Q[1:]], 'non-finite'),
 ])
 def test_states_that_cannot_be_the_arms_are_refused_with_the_reason(names, positions, reason):

@@ -47,7 +47,8 @@ def _nodes(context, *args, **kwargs):
     from probdis_ros.physics import load_scene
     share = _share()
     scene = LaunchConfiguration('scene').perform(context)
-    goal = [float(v) for v in load_scene(scene).goal]
+    world = load_scene(scene)
+    goal = [float(v) for v in world.goal]
     urdf = (share / 'urdf' / 'iiwa14.urdf').read_text()
     sim = LaunchConfiguration('sim_time').perform(context).lower() == 'true'
     return [
@@ -57,7 +58,9 @@ def _nodes(context, *args, **kwargs):
         Node(package='probdis_ros', executable='planner_node', name='probdis_planner',
              parameters=[str(share / 'config' / 'planner.yaml'),
                          {'goal': goal, 'use_sim_time': sim,
-                          'controller_node': '/mock_iiwa'}]),
+                          'controller_node': '/mock_iiwa',
+                          # kept above the table, as the demo and the experiments keep it
+                          'object_radius': float(world.object_reach)}]),
         Node(package='robot_state_publisher', executable='robot_state_publisher',
              parameters=[{'robot_description': urdf, 'use_sim_time': sim}],
              remappings=[('joint_states', '/lbr/joint_states')]),

@@ -341,13 +341,13 @@ class BlockDetector:
             return Verdict.MOVING
         ceiling = s.gap_ceiling + float(allowance.sum())
         if s.gap_ceiling and self.gap > ceiling:
-            return self._gap_block(f'gap {self.gap:.3f} rad above the ceiling {ceiling:.3f}')
+            return self._gap_block(f'gap {self.gap:.4f} rad above the ceiling {ceiling:.4f}')
         over = self.joint_gaps - (s.joint_gap_ceiling + allowance)
         if s.joint_gap_ceiling and over.max() > 0:
             joint = int(over.argmax())
             limit = s.joint_gap_ceiling + allowance[joint]
-            return self._gap_block(f'joint A{joint + 1} gap {self.joint_gaps[joint]:.3f} rad '
-                                   f'above its ceiling {limit:.3f}')
+            return self._gap_block(f'joint A{joint + 1} gap {self.joint_gaps[joint]:.4f} rad '
+                                   f'above its ceiling {limit:.4f}')
         if ended and t >= self.path.duration + s.motion_delay + s.settle_time:
             return self._gap_block(f'gap {self.gap:.3f} rad {s.settle_time} s after the end')
         if now - self._history[0][0] >= s.stall_time * 0.9:

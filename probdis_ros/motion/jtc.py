@@ -66,7 +66,7 @@ OLD_DRIVER_FILTER_TAU = -1.0 / (CONTROLLER_RATE * math.log(0.9))
 #: false``, the default) or ``'desired'`` (true: from its last command).
 JTC_STARTS = ('measured', 'desired')
 #: The start the planner models and the mock's controller runs unless told otherwise: it must
-#: be the real controller's (README, "On the real arm").
+#: be the real controller's (README, "Pointing it at the real arm").
 DEFAULT_JTC_START = 'measured'
 
 

@@ -95,7 +95,9 @@ def positions_by_name(names: Sequence[str], positions: Sequence[float],
         index[name] = i
     missing = [name for name in joint_names if name not in index]
     if missing:
-        raise BadJointStateError(f'missing joints {", ".join(missing)}')
+        raise BadJointStateError(f'missing joints {", ".join(missing)} (it names '
+                                 f'{", ".join(names) or "none"}: set joint_names to the '
+                                 f"arm's)")
     q = np.array([positions[index[name]] for name in joint_names], dtype=float)
     if not np.all(np.isfinite(q)):
         raise BadJointStateError(f'non-finite positions {q.tolist()}')

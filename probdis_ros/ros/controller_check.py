@@ -167,6 +167,6 @@ class ControllerSetting:
             return (f'joint_trajectory_controller holds the measured position by itself '
                     f'(on a tolerance violation, or cmd_timeout after a trajectory ends) '
                     f'with {named} ({self.controller_node}), and a planner that '
-                    f'models its last command would not see it: with '
-                    f'{PARAMETER} set these to 0 (README, "On the real arm"); not starting')
+                    f'models its last command would not see it: with {PARAMETER} set '
+                    f'these to 0 (README, "Pointing it at the real arm"); not starting')
         return ''

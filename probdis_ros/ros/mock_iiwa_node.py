@@ -57,7 +57,7 @@ from probdis_ros.physics.simulated_robot import (
 from probdis_ros.ros import MOCK_NODE
 from probdis_ros.ros.markers import scene_markers
 from probdis_ros.ros.messages import command_from_msg
-from probdis_ros.ros.node_main import run_node
+from probdis_ros.ros.node_main import refuse_unknown_parameters, run_node
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParametersResult
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, qos_profile_sensor_data, QoSProfile
@@ -119,6 +119,7 @@ class MockIiwa(Node):
         p('joint_states_topic', '/lbr/joint_states', _describe('sensor_msgs/JointState out'))
         p('trajectory_topic', '/lbr/joint_trajectory_controller/joint_trajectory',
           _describe('trajectory_msgs/JointTrajectory in'))
+        refuse_unknown_parameters(self)
         value = lambda name: self.get_parameter(name).value   # noqa: E731
         if value('engine') not in ENGINES:
             raise ValueError(f'engine must be one of {", ".join(ENGINES)}, '

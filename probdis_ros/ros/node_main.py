@@ -17,6 +17,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable
+import difflib
 import gc
 import signal
 import sys
@@ -52,6 +53,30 @@ def parameter_error(err: ParameterException) -> str:
     return str(err)
 
 
+def ros_args_error(err: RCLError) -> str:
+    """Return rcl's refusal of the ROS arguments as one line, with the fix where it is known."""
+    text = str(err).splitlines()[0]
+    if 'Sequence should be of same type' in text:
+        text += ' (write every number of a list with a decimal point: 0.0, not 0)'
+    return text
+
+
+def refuse_unknown_parameters(node: Node) -> None:
+    """
+    Raise ValueError (exit 2) for a start-up value of a parameter the node does not have.
+
+    rclpy drops such values without a word: a misspelt ``table_height`` on the real arm would
+    run with the default table, 0 m.
+    """
+    declared = set(node._parameters)              # rclpy keeps no public list of them
+    unknown = sorted(set(node._parameter_overrides) - declared)
+    if unknown:
+        guesses = [difflib.get_close_matches(name, declared, n=1) for name in unknown]
+        said = ', '.join(f'{name} (did you mean {guess[0]}?)' if guess else name
+                         for name, guess in zip(unknown, guesses))
+        raise ValueError(f'not a parameter of {node.get_name()}: {said}')
+
+
 def run_node(name: str, factory: Callable[[], Node], args: list[str] | None = None) -> int:
     """
     Create the node, spin it, and always halt and destroy it (which closes its files).
@@ -64,7 +89,11 @@ def run_node(name: str, factory: Callable[[], Node], args: list[str] | None = No
     (the arm ran the rest of its path unsupervised).  An error out of a callback halts it
     too before the node goes.
     """
-    stray = remove_ros_args(sys.argv if args is None else args)[1:]
+    try:
+        stray = remove_ros_args(sys.argv if args is None else args)[1:]
+    except RCLError as err:            # unparsable --ros-args, a --params-file not there
+        print(f'{name}: error: {ros_args_error(err)}', file=sys.stderr)
+        return 2
     if stray:
         # rclpy ignores them: a goal given as "-p goal:=[...]" without --ros-args was lost,
         # and the node ran with its defaults
@@ -85,7 +114,7 @@ def run_node(name: str, factory: Callable[[], Node], args: list[str] | None = No
     try:
         rclpy.init(args=args, signal_handler_options=options)
     except RCLError as err:            # unparsable --ros-args
-        print(f'{name}: error: {str(err).splitlines()[0]}', file=sys.stderr)
+        print(f'{name}: error: {ros_args_error(err)}', file=sys.stderr)
         return 2
     node = None
     reason = 'SIGINT or SIGTERM'

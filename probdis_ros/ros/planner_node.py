@@ -66,7 +66,7 @@ from probdis_ros.planning.warm_up import warm_up
 from probdis_ros.ros.controller_check import ControllerSetting
 from probdis_ros.ros.markers import markers_msg
 from probdis_ros.ros.messages import stamp_seconds, trajectory_msg
-from probdis_ros.ros.node_main import run_node
+from probdis_ros.ros.node_main import refuse_unknown_parameters, run_node
 from probdis_ros.ros.recorder import BagRecorder, message_types
 from probdis_ros.run import (
     Learned,
@@ -278,6 +278,7 @@ class PlannerNode(Node):
         self.namesake_heard = False
         for name, (default, descriptor) in PARAMETERS.items():
             self.declare_parameter(name, default, descriptor)
+        refuse_unknown_parameters(self)
         self.add_on_set_parameters_callback(self._check_parameters)
         self._run_settings()      # start-up values that do not go together: exit 2, named
         self.use_sim_time = bool(self.get_parameter('use_sim_time').value)
@@ -383,7 +384,9 @@ class PlannerNode(Node):
         self.create_timer(TICK, self._tick, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.create_timer(1.0, self._publish_diagnostics)
         self._publish_status()
-        self.get_logger().info(f'{NODE_NAME} ready: {len(self.fmap)} failures in the map')
+        map_file = self.get_parameter('map_file').value
+        self.get_logger().info(f'{NODE_NAME} ready: {len(self.fmap)} failures in the map'
+                               + (f' ({map_file})' if map_file else ' (in memory only)'))
 
     def _refuse_namesake(self) -> None:
         """Raise ValueError (exit 2) if the graph shows a namesake, before the map is read."""
@@ -493,7 +496,7 @@ class PlannerNode(Node):
                     return SetParametersResult(successful=False, reason=f'method: {err}')
             if param.name in ('joint_names', 'joint_states_topic', 'trajectory_topic',
                               'orientation', 'table', 'table_height', 'table_clearance',
-                              'object_radius') and hasattr(self, 'arm'):
+                              'object_radius', 'controller_node') and hasattr(self, 'arm'):
                 return SetParametersResult(successful=False,
                                            reason=f'{param.name} is fixed at start-up')
         return SetParametersResult(successful=True)
@@ -665,7 +668,9 @@ class PlannerNode(Node):
                            f'ago ({refused}); not starting')
         age = now - self.measured_at
         if self.measured is None or age > self.get_parameter('state_timeout').value:
-            return False, 'no fresh joint state has arrived; is the arm (driver) running?'
+            return False, (f'no fresh joint state has arrived on '
+                           f'{self.get_parameter("joint_states_topic").value}; is the arm '
+                           f'(driver) running?')
         if not self._command_subscribers():
             return False, (f'nothing subscribes to {self.traj_pub.topic_name}: no controller '
                            f'would execute the commands; is joint_trajectory_controller active?')
@@ -690,11 +695,12 @@ class PlannerNode(Node):
         refusal = self.controller_setting.refusal(desired)
         if refusal:
             return False, refusal
+        unchecked = ''
         if self.controller_setting.value is None:
-            self.get_logger().warning(
-                f"could not read joint_trajectory_controller's interpolate_from_desired_state "
-                f'({self.controller_setting.problem}): make sure it is '
-                f'{str(desired).lower()}, as this planner models it')
+            unchecked = (f"could not read joint_trajectory_controller's "
+                         f'interpolate_from_desired_state ({self.controller_setting.problem}): '
+                         f'make sure it is {str(desired).lower()}, as this planner models it')
+            self.get_logger().warning(unchecked)
         planner = self._make_planner()
         self.fmap.c_fail = float(self.get_parameter('c_fail').value)
         loop = Disentangler(self.arm, planner, np.asarray(goal, dtype=float), self.fmap,
@@ -717,7 +723,8 @@ class PlannerNode(Node):
                       running_sent_at)
         if self.run.outcome == 'succeeded':
             return True, f'already at the goal ({np.round(start, 3).tolist()}): nothing to do'
-        return True, f'disentangling from {np.round(start, 3).tolist()}'
+        started = f'disentangling from {np.round(start, 3).tolist()}'
+        return True, f'{started}; warning: {unchecked}' if unchecked else started
 
     # -- recording -----------------------------------------------------------------------
 

@@ -119,13 +119,22 @@ class ReplayResult:
     problems: list[str] = field(default_factory=list)
     settings: DetectorSettings | None = None    # what the detector ran with
 
+    @property
+    def peak_gap(self) -> float:
+        """
+        Return the largest L1 gap [rad] between the arm and its command, ``motion_delay`` before.
+
+        On a bag of free motion, the ``motion_delay`` that gives the least is the arm's lag.
+        """
+        return max(self.gaps, default=0.0)
+
     def summary(self) -> dict:
         """Return the JSON summary of ``probdis replay --json``."""
         return {'paths': self.paths,
                 'blocks': [{'t': b.t, 'x': b.x.tolist(), 'retreat': b.retreat}
                            for b in self.blocks],
                 'failures': len(self.fmap) if self.fmap is not None else 0,
-                'success': self.success}
+                'success': self.success, 'peak_gap_rad': self.peak_gap}
 
 
 def replay(bag: str | Path, joint_states_topic: str = JOINT_STATES,
