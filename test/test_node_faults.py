@@ -397,6 +397,29 @@ def test_a_map_file_that_cannot_be_used_is_named_and_kept_aside(
     assert ros.status['failures'] == 0 and not ros.status['errors']
 
 
+def test_joint_states_refused_while_idle_show_in_the_status_until_they_stop(ros, tmp_path):
+    # a driver of other joint names: the status said "ready" while every state was refused
+    planner(ros, tmp_path)
+    seen = diagnostics(ros)
+    stream = Stream(ros)
+    wait_for(lambda: ros.status.get('state') == 'idle', 10, 'the planner')
+    bad = [f'iiwa_joint_{i}' for i in range(1, 8)]
+    stream.message = lambda q=None, names=None, stamp=None, m=stream.message: m(q, bad, stamp)
+    wait_for(lambda: ros.status.get('errors'), 5, 'the refusal in the status')
+    assert ros.status['errors'] == ['joint states refused: missing joints lbr_A1, lbr_A2, '
+                                    'lbr_A3, lbr_A4, lbr_A5, lbr_A6, lbr_A7 (it names '
+                                    'iiwa_joint_1, iiwa_joint_2, iiwa_joint_3, iiwa_joint_4, '
+                                    'iiwa_joint_5, iiwa_joint_6, iiwa_joint_7: set joint_names '
+                                    "to the arm's)"], ros.status
+    wait_for(lambda: any(d.level == DiagnosticStatus.ERROR and 'refused' in d.message
+                         for d in seen), 5, 'diagnostics')
+    published = len(ros.statuses)
+    time.sleep(0.5)
+    assert len(ros.statuses) == published      # one status for the spell, not one a state
+    del stream.message                         # the arm's names again
+    wait_for(lambda: not ros.status.get('errors'), 5, 'the refusal cleared')
+
+
 def test_a_map_file_that_is_a_pipe_neither_hangs_nor_is_written(ros, tmp_path):
     path = tmp_path / 'map.json'
     os.mkfifo(path)

@@ -309,6 +309,7 @@ class PlannerNode(Node):
         self._refuse_namesake()           # another process's: discovery has had more time
         self.errors: dict[str, str] = {}      # recording: set and read in the executor thread
         self.map_error = ''                    # set by the I/O thread
+        self.refusing = ''                     # joint states are being refused: the first why
         self.map_writable = True
         self.fmap = self._load_map()
         self.get_logger().info(
@@ -1073,6 +1074,8 @@ class PlannerNode(Node):
     def _refused(self, reason: str) -> None:
         """Log a refused joint state; a run stops, decelerating from the last accepted one."""
         self.get_logger().error(f'joint state refused: {reason}', throttle_duration_sec=1.0)
+        if not self.refusing:         # the first reason of a spell (the values in it vary)
+            self.refusing = f'joint states refused: {reason}'
         if self.run is not None:
             self._guarded(self.run.bad_joint_state, reason)
 
@@ -1102,8 +1105,11 @@ class PlannerNode(Node):
                 'bag': self.bag_path, 'errors': self._errors()}
 
     def _errors(self) -> list[str]:
-        """Return the file faults in effect: recording, map persistence."""
-        return [e for e in (self.errors.get('recording', ''), self.map_error) if e]
+        """Return the faults in effect: recording, map persistence, refused joint states."""
+        if self.refusing and not self.state_check.refused_within(self._now(), REFUSAL_HOLD):
+            self.refusing = ''        # a second without a refusal ends the spell
+        return [e for e in (self.errors.get('recording', ''), self.map_error, self.refusing)
+                if e]
 
     def _publish_status(self) -> None:
         self._published_errors = self._errors()
