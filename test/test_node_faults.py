@@ -877,7 +877,7 @@ def test_on_simulated_time_a_starved_executor_reads_the_clock_the_simulation_is_
         running.clear()
         simulator.join()
     now, simulated = readings[0]
-    assert simulated - 0.05 < now <= simulated + 1e-9, (now, simulated)
+    assert simulated - 0.1 < now <= simulated + 1e-9, (now, simulated)     # not 0.3 behind
 
 
 def test_the_longest_the_executor_was_kept_from_running_in_a_run_is_reported(ros, tmp_path):
