@@ -985,6 +985,8 @@ class PlannerNode(Node):
                 recorder.flush_interval:
             recorder.flush()
             self._check_recorder()
+        if self.refusing and not self.state_check.refused_within(now, REFUSAL_HOLD):
+            self.refusing = ''        # a second without a refused joint state ends the spell
         if self._errors() != self._published_errors:      # e.g. from the I/O thread
             self._publish_status()
         if time.monotonic() - self._graph_checked >= GRAPH_CHECK:
@@ -1106,8 +1108,6 @@ class PlannerNode(Node):
 
     def _errors(self) -> list[str]:
         """Return the faults in effect: recording, map persistence, refused joint states."""
-        if self.refusing and not self.state_check.refused_within(self._now(), REFUSAL_HOLD):
-            self.refusing = ''        # a second without a refusal ends the spell
         return [e for e in (self.errors.get('recording', ''), self.map_error, self.refusing)
                 if e]
 
