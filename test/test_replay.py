@@ -191,6 +191,34 @@ def test_joint_states_held_up_in_delivery_are_dated_by_their_stamps(tmp_path):
     assert result.paths == 1 and result.blocks == [] and result.success, result.problems
 
 
+@pytest.mark.parametrize('by_probdis', [False, True])
+def test_states_are_replayed_at_the_times_the_planner_dated_them(tmp_path, by_probdis):
+    # the planner records each state at the time it dated it, from a delivery it learned
+    # long before the bag began; re-dated from the bag alone, a live block at a gap 3e-5 rad
+    # past its ceiling came a millisecond early and was missed. Another recorder's bag holds
+    # receive times: those are dated by stamp, as the planner dates them
+    delivery = [0.001] + [0.005] * 99          # one state delivered quicker than the rest
+    messages = [(round((2.0 + k / RATE + d) * 1e9), JS,
+                 js_message(JOINTS, WORLD.start, 2.0 + k / RATE))
+                for k, d in enumerate(delivery)]
+    move = time_path(np.array([WORLD.start, WORLD.start + 0.1]), iiwa_arm().velocity_limits,
+                     0.5)
+    messages.append((round(3.1e9), TRAJ, traj_message(move, JOINTS)))
+    types = {JS: JS_TYPE, TRAJ: TRAJ_TYPE}
+    if by_probdis:                             # the planner's status: its recording
+        status = '/probdis_planner/status'
+        types[status] = 'std_msgs/msg/String'
+        messages.insert(0, (round(1.9e9), status,
+                            {'data': json.dumps({'state': 'idle', 'paths': 0})}))
+    write_bag(tmp_path / 'bag', messages, *FORMATS[0], types=types)
+    result = replay(tmp_path / 'bag')
+    t0 = messages[0][0] * 1e-9
+    stamps = 2.0 + np.arange(100) / RATE
+    recorded = stamps + np.array(delivery)
+    expected = recorded if by_probdis else stamps + 0.001
+    np.testing.assert_allclose(np.array(result.times) + t0, expected, atol=1e-6)
+
+
 def test_the_peak_gap_of_a_free_move_is_least_at_the_arms_own_lag(tmp_path):
     # README: motion_delay is measured on the arm by replaying a free move with several
     arm = iiwa_arm()

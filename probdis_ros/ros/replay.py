@@ -60,6 +60,10 @@ TRAJECTORY = '/lbr/joint_trajectory_controller/joint_trajectory'
 JOINTS = [f'lbr_A{i}' for i in range(1, 8)]
 JOINT_STATE_TYPE = 'sensor_msgs/msg/JointState'
 TRAJECTORY_TYPE = 'trajectory_msgs/msg/JointTrajectory'
+#: [s] a state the planner recorded within this of the time the replay dates it at was dated
+#: alike (rounding); beyond it, the planner knew a delivery the bag does not show (a rise of
+#: the clocks' offset, DRIFT_NOISE 1e-4 s or more), and its time is the one recorded
+REDATING_TOLERANCE = 1e-5
 
 
 class ReplayError(Exception):
@@ -223,6 +227,13 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
     previous = None            # the state of the last status message
     jtc_start = 'measured'     # where JTC starts a command, as the live planner modelled it
     running = None             # the last command as JTC ran it, and when it was sent
+    # the planner records each state at the time it dated it (its stamp moved by the
+    # stream's quickest delivery as the node knew it, from long before the bag began): that
+    # time is the detector's, and a re-dating from the bag alone differed by a millisecond
+    # (a live block at a gap 3e-5 rad past its ceiling was missed); other recorders' bags
+    # hold receive times, which are dated as the planner would date them
+    dated = bool(status_topics)
+    offset = 0.0               # the recording's clock less the arm's (stamped commands)
     for message in source.messages(topics):
         t = message.stamp_ns * 1e-9 - t0
         msg = source.deserialize(message)
@@ -252,7 +263,7 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
             if measured is None:       # JTC starts it from the first state it reads
                 early = (t, command)   # (its stamp moved by the offset that state shows)
                 continue
-            command = _on_recording_clock(command, states.clock_offset, t0)
+            command = _on_recording_clock(command, offset, t0)
             last = None
             if jtc_start == 'desired' and running is not None:
                 last = running[0].sample(t - running[1])
@@ -284,11 +295,14 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
         except BadJointStateError as err:
             result.problems.append(f'{t:.3f} s: joint state refused: {err}')
             continue
-        t = states.measured_at(received, stamp) - t0
+        redated = states.measured_at(received, stamp) - t0
+        if not dated or abs(t - redated) <= REDATING_TOLERANCE:
+            t = redated                # as the planner computed it, to the last bit
+        offset = states.clock_offset + (t - redated)
         measured, measured_velocity = q, v
         if early is not None:
             sent, command = early
-            command, early = _on_recording_clock(command, states.clock_offset, t0), None
+            command, early = _on_recording_clock(command, offset, t0), None
             running = (JtcTrajectory(command, q, measured_velocity, sent), sent)
             detector, kind = BlockDetector(running[0], sent, settings), 'path'
             result.paths += 1
