@@ -228,10 +228,10 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
     jtc_start = 'measured'     # where JTC starts a command, as the live planner modelled it
     running = None             # the last command as JTC ran it, and when it was sent
     # the planner records each state at the time it dated it (its stamp moved by the
-    # stream's quickest delivery as the node knew it, from long before the bag began): that
-    # time is the detector's, and a re-dating from the bag alone differed by a millisecond
-    # (a live block at a gap 3e-5 rad past its ceiling was missed); other recorders' bags
-    # hold receive times, which are dated as the planner would date them
+    # stream's quickest delivery as the node knew it, from long before the bag began):
+    # where a re-dating from the bag alone differs beyond rounding (by a millisecond once: a
+    # live block at a gap 3e-5 rad past its ceiling was missed), that recorded time is the
+    # detector's; other recorders' bags hold receive times, dated as the planner dates them
     dated = bool(status_topics)
     offset = 0.0               # the recording's clock less the arm's (stamped commands)
     for message in source.messages(topics):
