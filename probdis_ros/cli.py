@@ -440,7 +440,8 @@ def cmd_experiment_robot(args: argparse.Namespace) -> int:
                                    engine=args.engine, sim_time=args.sim_time,
                                    real_time_factor=args.real_time_factor,
                                    offline=args.offline, detection=detection,
-                                   jtc_start=args.jtc_start, faults=faults)
+                                   jtc_start=args.jtc_start, faults=faults,
+                                   cartesian_speed_limit=_cartesian_speed(args))
     # the runs asked for only: a DIR may hold more runs (an earlier --runs), other scenes
     # or methods
     wanted = {(s, str(m), r) for s in scenarios for m in methods for r in range(runs)}
@@ -492,6 +493,9 @@ def cmd_sim(args: argparse.Namespace) -> int:
 
     if args.jtc_start != DEFAULT_JTC_START:
         raise UsageError('--jtc-start needs --engine physics (the kinematic sweeps run no JTC)')
+    if args.cartesian_speed_limit:
+        raise UsageError('--cartesian-speed-limit needs --engine physics (the kinematic '
+                         'sweeps time no motion)')
 
     from probdis_ros.planning import Method
     from probdis_ros.resources import scenario_path
@@ -590,7 +594,9 @@ def _sim_physics(args: argparse.Namespace) -> int:
 
     episode = run_physics_episode(scene, method, seed=args.seed or 0,
                                   max_paths=args.max_paths,
-                                  run_settings=RunSettings(jtc_start=args.jtc_start))
+                                  run_settings=RunSettings(
+                                      jtc_start=args.jtc_start,
+                                      cartesian_speed_limit=_cartesian_speed(args)))
     summary = episode.summary()
     # the result first: a plot that cannot be written after all must not lose the episode
     if args.json:
@@ -602,7 +608,8 @@ def _sim_physics(args: argparse.Namespace) -> int:
               f'simulated in {summary["wall_time_s"]} s ({summary["real_time_factor"]}x real '
               f'time), peak contact force {summary["peak_contact_force_n"]} N; fastest '
               f"command change {summary['command_speed_peak']:.2f} x a joint's velocity "
-              f'limit (JTC), {summary["sent_speed_peak"]:.2f} x (after the driver\'s filter)')
+              f'limit (JTC), {summary["sent_speed_peak"]:.2f} x (after the driver\'s filter); '
+              f'fastest point of the arm {summary["point_speed_peak_mps"]:.3f} m/s')
     if args.plot:
         arm = iiwa_arm()
         failures = [(np.array(f['x']), np.array(f['v'])) for f in episode.failures]
@@ -849,9 +856,11 @@ def cmd_demo(args: argparse.Namespace) -> int:
     if not abs(args.arm_clock_offset) <= 1e6:
         raise UsageError(f'--arm-clock-offset must be within +-1e6 s, got '
                          f'{args.arm_clock_offset:g}')
+    limit = _cartesian_speed(args)
     result = run_demo(world, args.timeout, quiet=args.json, engine=args.engine,
                       sim_time=args.sim_time, jtc_start=args.jtc_start,
-                      extra_mock_args=('-p', f'clock_offset:={args.arm_clock_offset!r}'))
+                      extra_mock_args=('-p', f'clock_offset:={args.arm_clock_offset!r}'),
+                      extra_planner_args=('-p', f'cartesian_speed_limit:={float(limit)!r}'))
     summary = {k: result[k] for k in ('success', 'paths', 'failures', 'replan_latency_s',
                                       'bag')}
     if args.json:
@@ -926,7 +935,8 @@ def cmd_replay(args: argparse.Namespace) -> int:
         return status
     print(f'{args.bag}: {result.runs} run(s), {result.paths} path(s), {len(result.blocks)} '
           f'block(s), {"disentangled" if result.success else "not disentangled"}; peak gap '
-          f'{result.peak_gap:.3f} rad (motion_delay {result.settings.motion_delay:g} s)')
+          f'{result.peak_gap:.3f} rad (motion_delay {result.settings.motion_delay:g} s); '
+          f'fastest point of the arm {result.peak_point_speed:.3f} m/s')
     for block in result.blocks:
         x = ', '.join(f'{v:.3f}' for v in block.x)
         during = 'a retreat' if block.retreat else 'a path'
@@ -981,6 +991,21 @@ def _jtc_start_argument(parser: argparse.ArgumentParser, where: str = '') -> Non
                         'command, as the planner models it: the measured state, or its last '
                         f'command (interpolate_from_desired_state: true){where} (default: '
                         f'{DEFAULT_JTC_START})')
+
+
+def _cartesian_speed_argument(parser: argparse.ArgumentParser, where: str = '') -> None:
+    parser.add_argument('--cartesian-speed-limit', type=float, default=0.0, metavar='M/S',
+                        help='the fastest any point of the arm (its collision shapes, the '
+                        "object's ball, the flange) may move on a path or retreat, as the "
+                        f"planner's cartesian_speed_limit{where} (default 0: the joint limits "
+                        'only)')
+
+
+def _cartesian_speed(args: argparse.Namespace) -> float:
+    if not 0.0 <= args.cartesian_speed_limit <= 10.0:
+        raise UsageError(f'--cartesian-speed-limit must be in [0, 10] m/s, got '
+                         f'{args.cartesian_speed_limit:g}')
+    return args.cartesian_speed_limit
 
 
 def _positive_int(text: str) -> int:
@@ -1091,6 +1116,7 @@ def build_parser() -> argparse.ArgumentParser:
                      help="the simulated arm: the kinematic one of the paper's settings, or "
                      'MuJoCo in joint impedance through JTC (with --scene or --family)')
     _jtc_start_argument(sim, ' (with --engine physics)')
+    _cartesian_speed_argument(sim, ', with --engine physics')
     sim.add_argument('--scene', help='with --engine physics: a scene file, or the name of one '
                      'in config/scenes/ (default demo_hook)')
     sim.add_argument('--no-table', action='store_true', help='kinematic: no table under the '
@@ -1152,6 +1178,7 @@ def build_parser() -> argparse.ArgumentParser:
                       help="the mock arm's clock less this machine's [s]: a driver on a "
                       'computer whose clock is not synchronised (default 0)')
     _jtc_start_argument(demo)
+    _cartesian_speed_argument(demo)
     demo.add_argument('--json', action='store_true',
                       help='print {"success", "paths", "failures", "replan_latency_s", '
                       '"bag"}')
@@ -1294,12 +1321,14 @@ def build_parser() -> argparse.ArgumentParser:
                        '(repeatable; README "Parameters")')
     robot.add_argument('--fault', action='append', metavar='NAME=VALUE',
                        help="a fault of the mock in every run, by its node parameter's name: "
-                       'noise [rad], latency [s], object_mass_error [kg], armature [kg m^2], '
-                       'grasp_stiffness [Nm/rad] (repeatable; README "Parameters")')
+                       'noise [rad], latency [s], speed_monitor [m/s], object_mass_error [kg], '
+                       'armature [kg m^2], grasp_stiffness [Nm/rad] (repeatable; README '
+                       '"Parameters")')
     robot.add_argument('--against', metavar='DIR', help='compare with the same runs in '
                        "another experiment's DIR (another setting, fault or commit): paired "
                        'by scene, method and run, with a bootstrap interval')
     _jtc_start_argument(robot)
+    _cartesian_speed_argument(robot)
     robot.add_argument('--json', action='store_true', help='print every run as JSON')
     robot.set_defaults(handler=cmd_experiment_robot)
     return parser

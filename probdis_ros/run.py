@@ -62,6 +62,7 @@ import threading
 
 import numpy as np
 from probdis_ros.model.arms import Arm
+from probdis_ros.motion.cartesian_speed import CartesianSpeedLimit
 from probdis_ros.motion.detector import BlockDetector, DetectorSettings, slope_of, Verdict
 from probdis_ros.motion.jtc import (
     CONTROLLER_RATE,
@@ -148,6 +149,9 @@ class RunSettings:
     jerk_limit: float = DEFAULT_JERK                   # rad/s^3, every joint
     state_timeout: float = 0.5                         # joint states older than this stop
     replan_tolerance: float = 0.05                     # L1 [rad] between plan start and arm
+    # [m/s] no point of the arm (its collision shapes, the object's ball, the tip) faster on
+    # a path or retreat (KUKA's T1: README "Pointing it at the real arm"); 0: joint limits only
+    cartesian_speed_limit: float = 0.0
     detection: DetectorSettings = field(default_factory=DetectorSettings)
     # where JTC starts a new command: 'measured' (interpolate_from_desired_state false, the
     # default) or 'desired' (true: from its last command; every command is then planned
@@ -166,16 +170,22 @@ class RunSettings:
         for name in ('acceleration_limit', 'jerk_limit', 'state_timeout', 'replan_tolerance'):
             if not getattr(self, name) > 0:
                 raise ValueError(f'{name} must be positive, got {getattr(self, name)}')
+        if not self.cartesian_speed_limit >= 0:
+            raise ValueError(f'cartesian_speed_limit must be >= 0 (0: off), got '
+                             f'{self.cartesian_speed_limit}')
         if self.jtc_start not in JTC_STARTS:
             raise ValueError(f'jtc_start must be one of {", ".join(JTC_STARTS)}, got '
                              f'{self.jtc_start!r}')
 
     def limits(self, arm: Arm) -> MotionLimits:
         """Return the motion limits: the arm's velocities, these accelerations and scalings."""
+        cartesian = None
+        if self.cartesian_speed_limit > 0:
+            cartesian = CartesianSpeedLimit(arm, self.cartesian_speed_limit)
         return MotionLimits(velocity=arm.velocity_limits, acceleration=self.acceleration_limit,
                             jerk=self.jerk_limit, velocity_scaling=self.velocity_scaling,
                             acceleration_scaling=self.acceleration_scaling,
-                            lower=arm.lower, upper=arm.upper)
+                            lower=arm.lower, upper=arm.upper, cartesian=cartesian)
 
 
 #: [rad/s] JTC's command moves when a joint's speed is above this (a desired start stamps it)

@@ -24,6 +24,7 @@ import sys
 from conftest import probdis_command
 import numpy as np
 from probdis_ros.model import iiwa_arm
+from probdis_ros.motion.cartesian_speed import point_speeds
 from probdis_ros.motion.timing import time_path
 from probdis_ros.resources import scenario_path
 from probdis_ros.ros.mock_iiwa_node import MockIiwa
@@ -219,7 +220,8 @@ def test_states_are_replayed_at_the_times_the_planner_dated_them(tmp_path, by_pr
     np.testing.assert_allclose(np.array(result.times) + t0, expected, atol=1e-6)
 
 
-def test_the_peak_gap_of_a_free_move_is_least_at_the_arms_own_lag(tmp_path):
+def test_a_free_move_gives_the_least_peak_gap_at_the_arms_own_lag_and_its_top_speed(
+        tmp_path):
     # README: motion_delay is measured on the arm by replaying a free move with several
     arm = iiwa_arm()
     path = np.array([WORLD.start, WORLD.start + np.array([0.8, -0.4, 0.0, 0.6, 0.0, -0.5, 1.2])])
@@ -235,6 +237,14 @@ def test_the_peak_gap_of_a_free_move_is_least_at_the_arms_own_lag(tmp_path):
              for delay in (0.0, 0.04, lag, 0.12, 0.16)}
     assert min(peaks, key=peaks.get) == lag, peaks
     assert peaks[lag] < 0.2 * peaks[0.0], peaks
+    # and the fastest point of the arm, what KUKA's Cartesian speed monitoring would see
+    # (README, T1): from the positions (these states carry no velocities), against the
+    # move's own points differenced every millisecond
+    fine = np.array([timed.at(t) for t in np.arange(0.0, timed.duration, 1e-3)])
+    truth = point_speeds(arm, fine[:-1], np.diff(fine, axis=0) / 1e-3).max()
+    assert truth > 0.3
+    fastest = replay(tmp_path / 'bag').summary()['peak_point_speed_mps']
+    assert fastest == pytest.approx(truth, rel=0.03)
 
 
 def test_a_command_recorded_before_the_first_joint_state_starts_from_the_first_one(tmp_path):

@@ -401,6 +401,23 @@ def test_stop_during_motion_decelerates_to_rest_within_the_limits(ros, tmp_path)
     assert ros.status['state'] == 'stopped'
 
 
+def test_a_cartesian_speed_limit_caps_every_point_of_the_arm_in_what_is_sent(ros, tmp_path):
+    from probdis_ros.model.table import ROBOT_TABLE
+    from probdis_ros.motion.cartesian_speed import point_speeds
+
+    limit = 0.15        # at velocity scaling 0.7 the joint limits alone allow far more
+    planner(ros, tmp_path, cartesian_speed_limit=limit)
+    mock(ros)
+    wait_for(lambda: ros.call('start').success, 20, 'start')
+    wait_for(lambda: ros.trajectories, 20, 'a path')
+    points = ros.trajectories[0][1].points
+    positions = np.array([p.positions for p in points])
+    velocities = np.array([p.velocities for p in points])
+    fastest = point_speeds(iiwa_arm().on_table(ROBOT_TABLE), positions, velocities).max()
+    assert 0.9 * limit <= fastest <= limit
+    assert ros.call('stop').success
+
+
 @pytest.mark.parametrize('offset', [3.0, -3.0])
 def test_a_stamped_stop_reaches_an_arm_whose_clock_is_off(ros, tmp_path, offset):
     # a desired start stamps a command made while JTC's command moves, and JTC runs it on

@@ -145,6 +145,28 @@ def test_the_command_guard_stops_the_driver_on_a_speed_the_arm_may_not_reach():
         assert measure.long_edge(scaling).speed_over_limit < 0.95
 
 
+def test_kukas_speed_monitoring_stops_a_fast_arm_and_lets_a_capped_motion_run():
+    # the long edge at velocity scaling 0.2 moves the arm's points at up to ~0.5 m/s: a
+    # monitored 0.25 m/s (T1) stops it; timed under a Cartesian cap of 0.2 it runs to the end
+    from probdis_ros.motion.cartesian_speed import CartesianSpeedLimit
+    from probdis_ros.motion.profiles import MotionLimits, time_parameterize
+
+    start, goal = measure.LONG_EDGE
+    free = replace(load_scene('demo_hook'), obstacles=(), start=start, goal=goal)
+    for cap in (None, 0.2):
+        robot, _ = build_robot('physics', free, RobotSettings(speed_monitor=0.25))
+        limits = MotionLimits(cartesian=cap and CartesianSpeedLimit(ARM, cap))
+        motion = time_parameterize(np.array([start, goal]), limits)
+        robot.command(motion.command)
+        while robot.stopped is None and robot.time < motion.duration + 0.5:
+            robot.step()
+        if cap is None:
+            assert robot.stopped is not None and 'speed monitoring' in robot.stopped
+        else:
+            assert robot.stopped is None
+            np.testing.assert_allclose(robot.engine.q, goal, atol=0.01)
+
+
 def test_the_command_guard_stops_the_driver_on_a_command_past_a_limit():
     # without ros2_control's joint limiter (enforce_command_limits false) the command
     # reaches the driver's guard, which ends the session; with it (the lbr stack's

@@ -32,10 +32,14 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from functools import cache
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 from probdis_ros.motion.jtc import CONTROLLER_RATE, interpolate, TrajectoryCommand
 import ruckig
+
+if TYPE_CHECKING:
+    from probdis_ros.motion.cartesian_speed import CartesianSpeedLimit
 
 #: The lbr stack's MoveIt ``joint_limits.yaml`` (iiwa14_moveit_config): 10 rad/s² per joint.
 DEFAULT_ACCELERATION = 10.0
@@ -91,7 +95,8 @@ class MotionLimits:
     Scalars broadcast to every joint.  Jerk is scaled with ``acceleration_scaling`` so that
     the acceleration ramp time (acceleration / jerk) does not depend on the scaling.  The
     position limits (``lower``, ``upper``; the URDF's by default, pass them minus a margin)
-    bound stops.
+    bound stops.  ``cartesian`` (None: none) caps the speed of every point of the arm on each
+    edge of a path (:mod:`probdis_ros.motion.cartesian_speed`); a stop only slows down.
     """
 
     velocity: np.ndarray = field(default_factory=lambda: _default(0))
@@ -101,6 +106,7 @@ class MotionLimits:
     acceleration_scaling: float = DEFAULT_ACCELERATION_SCALING
     lower: np.ndarray = field(default_factory=lambda: _default(1))
     upper: np.ndarray = field(default_factory=lambda: _default(2))
+    cartesian: CartesianSpeedLimit | None = None
 
     def __post_init__(self) -> None:
         """Broadcast to arrays and refuse what no motion could respect, naming the field."""
@@ -263,9 +269,10 @@ def time_parameterize(path: np.ndarray, limits: MotionLimits | None = None,
     Time via points ``(M, n)`` from rest at the first (where the arm is) to rest at the last.
 
     Each edge is a 1-D jerk-limited time-optimal profile of the edge parameter, with scalar
-    limits (the smallest over joints of limit_j / |direction_j|), then rest until the next
-    period; the arm rests at every via point.  Zero-length edges are skipped (their via
-    points share one time).  A path of one point, or of zero-length edges only, gives a
+    limits (the smallest over joints of limit_j / |direction_j|; the velocity also no more
+    than ``limits.cartesian`` allows on the edge), then rest until the next period; the arm
+    rests at every via point.  Zero-length edges are skipped (their via points share one
+    time).  A path of one point, or of zero-length edges only, gives a
     motion of no duration whose command is a one-point hold at that point.
     """
     limits = MotionLimits() if limits is None else limits
@@ -291,6 +298,8 @@ def time_parameterize(path: np.ndarray, limits: MotionLimits | None = None,
     u = np.abs(deltas) / np.maximum(lengths, MIN_EDGE)[:, None]   # max |u_j| = 1
     with np.errstate(divide='ignore'):
         scalar = [np.min(np.where(u > 0, x / u, np.inf), axis=1) for x in (v_max, a_max, j_max)]
+    if limits.cartesian is not None:
+        scalar[0] = np.minimum(scalar[0], limits.cartesian.edge_speeds(path))
 
     blocks = [(path[0][None], np.zeros((1, n)), np.zeros((1, n)))]
     via_steps = [0]

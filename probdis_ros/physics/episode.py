@@ -32,6 +32,7 @@ import time
 import numpy as np
 from probdis_ros.model import iiwa_arm
 from probdis_ros.model.table import ROBOT_TABLE, Table
+from probdis_ros.motion.cartesian_speed import point_speeds
 from probdis_ros.physics.model import TABLE
 from probdis_ros.physics.settings import PhysicsSettings
 from probdis_ros.physics.simulated_robot import build_robot, RobotSettings
@@ -66,6 +67,9 @@ class PhysicsEpisode:
     # velocity limit (above 1: a step the arm's controller is sent)
     command_speed_peak: float = 0.0
     sent_speed_peak: float = 0.0
+    # the fastest any point of the arm (collision shapes, the object's ball, the flange)
+    # moved [m/s], of its true motion: what KUKA's Cartesian speed monitoring sees
+    point_speed_peak: float = 0.0
 
     def summary(self) -> dict:
         """
@@ -91,6 +95,7 @@ class PhysicsEpisode:
                                             for t in self.external_torque_peak],
                 'command_speed_peak': round(self.command_speed_peak, 3),
                 'sent_speed_peak': round(self.sent_speed_peak, 3),
+                'point_speed_peak_mps': round(self.point_speed_peak, 3),
                 'plan_times_s': self.plan_times_s}
 
 
@@ -126,7 +131,7 @@ def run_physics_episode(scene: str, method: str | Method = 'probabilistic', seed
                                min_retreat=min_retreat)
     run = Run(arm, loop, run_settings or RunSettings())
     failures, commands = [], []
-    times, configs, gaps, forces, table_forces = [], [], [], [], []
+    times, configs, velocities, gaps, forces, table_forces = [], [], [], [], [], []
     torque_peak = np.zeros(arm.n_joints)
 
     def act() -> None:
@@ -153,6 +158,7 @@ def run_physics_episode(scene: str, method: str | Method = 'probabilistic', seed
         act()
         times.append(robot.time)
         configs.append(robot.engine.q.copy())
+        velocities.append(robot.engine.qdot)
         gaps.append(run.detector.gap if run.detector is not None else 0.0)
         contacts = robot.engine.contacts()
         forces.append(sum(c.force for c in contacts))
@@ -173,4 +179,6 @@ def run_physics_episode(scene: str, method: str | Method = 'probabilistic', seed
         plan_times_s=loop.plan_times,
         sim_time_s=robot.time, wall_time_s=time.perf_counter() - wall, scene=scene_doc,
         loop=loop, message=run.message, commands=commands,
-        command_speed_peak=robot.command_speed_peak, sent_speed_peak=robot.sent_speed_peak)
+        command_speed_peak=robot.command_speed_peak, sent_speed_peak=robot.sent_speed_peak,
+        point_speed_peak=float(point_speeds(arm, np.array(configs), np.array(velocities))
+                               .max(initial=0.0)) if configs else 0.0)

@@ -33,7 +33,10 @@ The driver's command guard (the lbr stack's default, ``guard``): a command outsi
 position limits, or a measured joint speed (the difference of two measured positions over
 the period) above the URDF's velocity limit, stops the driver (:attr:`SimulatedRobot.stopped`
 says why): from then on the arm holds where it is and no joint state is reported, as a
-real driver that threw "invalid command" leaves it.
+real driver that threw "invalid command" leaves it.  KUKA's own Cartesian speed monitoring
+(``speed_monitor`` [m/s], 0 by default: off; a safety configuration may set one, T1 means to
+keep 250 mm/s) stops it the same way when a point of the arm (its URDF collision shapes and
+the flange) moves faster: a safety stop ends the FRI session.
 
 What the driver reports (:meth:`SimulatedRobot.joint_state`) can carry the faults a real
 setup shows: Gaussian noise, a latency, and the "echo" of a driver with ``open_loop`` in
@@ -54,6 +57,7 @@ from typing import Protocol, TYPE_CHECKING
 
 import numpy as np
 from probdis_ros.model.arms import Arm
+from probdis_ros.motion.cartesian_speed import point_speeds
 from probdis_ros.motion.jtc import (
     CommandLimiter,
     CONTROLLER_RATE,
@@ -135,6 +139,7 @@ class RobotSettings:
     latency: float = 0.0                    # reported joint states are this old [s]
     echo: bool = False                      # report the command sent, not the arm (open_loop)
     guard: bool = True                      # the driver's command guard stops it on a fault
+    speed_monitor: float = 0.0              # KUKA's Cartesian speed monitoring [m/s]; 0: off
     limiter: bool = True                    # ros2_control's joint limiter (CommandLimiter)
     seed: int = 0                           # noise stream
     jtc_start: str = DEFAULT_JTC_START      # JTC's interpolate_from_desired_state: 'desired'
@@ -143,7 +148,7 @@ class RobotSettings:
         """Refuse settings that cannot run."""
         if not self.period > 0:
             raise ValueError(f'period must be positive, got {self.period}')
-        for name in ('filter_tau', 'noise', 'latency'):
+        for name in ('filter_tau', 'noise', 'latency', 'speed_monitor'):
             if not getattr(self, name) >= 0:
                 raise ValueError(f'{name} must be non-negative, got {getattr(self, name)}')
         if self.jtc_start not in JTC_STARTS:
@@ -219,7 +224,7 @@ class SimulatedRobot:
         self.sent_speed_peak = max(self.sent_speed_peak,
                                    self._speed_over_limit(sent - self._sent_before))
         self.engine.advance(sent, self.settings.period)
-        if self.settings.guard:
+        if self.settings.guard or self.settings.speed_monitor:
             self.stopped = self._guard(sent, before)
             if self.stopped is not None:
                 self._held = self.engine.q.copy()
@@ -231,7 +236,16 @@ class SimulatedRobot:
         return float(np.max(speed / self._limits.velocity_limits))
 
     def _guard(self, sent: np.ndarray, before: np.ndarray) -> str | None:
-        """Return why the lbr stack's command guard refuses this period, or None."""
+        """Return why the command guard or KUKA's speed monitoring stops it now, or None."""
+        limit = self.settings.speed_monitor
+        if limit:
+            fastest = float(point_speeds(self._limits, self.engine.q[None],
+                                         self.engine.qdot[None])[0])
+            if fastest > limit:
+                return (f"KUKA's Cartesian speed monitoring: a point of the arm at "
+                        f'{fastest:.3f} m/s, above {limit:g} m/s (a safety stop)')
+        if not self.settings.guard:
+            return None
         limits = self._limits
         outside = (sent < limits.lower) | (sent > limits.upper)
         if outside.any():
@@ -276,11 +290,13 @@ ENGINES = ('physics', 'kinematic')
 
 
 #: What a real setup adds to the ideal mock, by the mock node's parameter names: the
-#: driver's joint-state ``noise`` [rad] and ``latency`` [s] (RobotSettings), the load model's
+#: driver's joint-state ``noise`` [rad] and ``latency`` [s] and KUKA's ``speed_monitor``
+#: [m/s] (RobotSettings), the load model's
 #: ``object_mass_error`` [kg], the motors' reflected inertia ``armature`` [kg m^2, every
 #: joint] and a grasp that gives, ``grasp_stiffness`` [Nm/rad] (PhysicsSettings; the
 #: physics arm only).
-FAULTS = ('noise', 'latency', 'object_mass_error', 'armature', 'grasp_stiffness')
+FAULTS = ('noise', 'latency', 'speed_monitor', 'object_mass_error', 'armature',
+          'grasp_stiffness')
 #: The faults of the physics arm alone.
 PHYSICS_FAULTS = ('object_mass_error', 'armature', 'grasp_stiffness')
 
@@ -298,7 +314,8 @@ def with_faults(faults: Mapping[str, float], settings: RobotSettings | None = No
     if unknown:
         raise ValueError(f'no fault {unknown[0]!r} (one of {", ".join(FAULTS)})')
     robot = replace(settings or RobotSettings(),
-                    **{k: float(v) for k, v in faults.items() if k in ('noise', 'latency')})
+                    **{k: float(v) for k, v in faults.items()
+                       if k in ('noise', 'latency', 'speed_monitor')})
     physics = replace(PhysicsSettings(), **{k: float(v) for k, v in faults.items()
                                             if k in ('object_mass_error', 'grasp_stiffness')})
     if 'armature' in faults:

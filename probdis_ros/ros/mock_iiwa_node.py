@@ -93,6 +93,10 @@ class MockIiwa(Node):
         p('noise', 0.0, _describe('std. dev. of joint-state noise [rad]', 0.0, 0.1))
         p('latency', 0.0, _describe('delay of published joint states [s]', 0.0, 1.0))
         p('echo', False, _describe('report the commanded position (a driver in open loop)'))
+        p('speed_monitor', 0.0, _describe(
+            "KUKA's Cartesian speed monitoring [m/s]: a point of the arm (URDF collision "
+            'shapes, flange) faster stops it, as a safety stop ends the FRI session (T1 means '
+            'to keep 0.25); 0: off', 0.0, 10.0))
         p('enforce_command_limits', True, _describe(
             "the controller manager's joint limiter between JTC and the driver (the lbr "
             "stack's default): each period's command within the velocity limits of the last"))

@@ -102,7 +102,7 @@ NODE_NAME = 'probdis_planner'
 #: The defaults of the run and of its detector: the parameters below take theirs from here.
 RUN, DETECT = RunSettings(), RunSettings().detection
 RUN_FIELDS = ('velocity_scaling', 'acceleration_scaling', 'acceleration_limit', 'jerk_limit',
-              'state_timeout', 'replan_tolerance')
+              'state_timeout', 'replan_tolerance', 'cartesian_speed_limit')
 DETECTOR_FIELDS = ('d_dist', 'stall_time', 'stall_motion', 'settle_time', 'motion_delay',
                    'gap_ceiling', 'joint_gap_ceiling', 'onset_gap', 'echo_time',
                    'driver_tau', 'torque_ceiling', 'load_mass', 'load_com')
@@ -174,6 +174,10 @@ PARAMETERS = {
     'acceleration_limit': (RUN.acceleration_limit, _float(
         'joint acceleration limit [rad/s^2] (the lbr stack MoveIt configuration)', 0.1, 100.0)),
     'jerk_limit': (RUN.jerk_limit, _float('joint jerk limit [rad/s^3]', 1.0, 10000.0)),
+    'cartesian_speed_limit': (RUN.cartesian_speed_limit, _float(
+        'fastest [m/s] any point of the arm (its URDF collision shapes, the ball of '
+        "object_radius, the flange) moves on a path or retreat; in KUKA's T1 (250 mm/s) "
+        'set 0.2; 0: the joint limits only', 0.0, 10.0)),
     'd_dist': (DETECT.d_dist, _float('L1 gap [rad] above which a stalled motion is blocked',
                                      0.001, 1.0)),
     'stall_time': (DETECT.stall_time, _float('time without progress that counts as stalled '

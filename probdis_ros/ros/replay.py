@@ -38,6 +38,7 @@ from pathlib import Path
 
 import numpy as np
 from probdis_ros.model import FailureMap, iiwa_arm
+from probdis_ros.motion.cartesian_speed import point_speeds
 from probdis_ros.motion.detector import BlockDetector, DetectorSettings, Verdict
 from probdis_ros.motion.jtc import (
     JTC_STARTS,
@@ -120,6 +121,7 @@ class ReplayResult:
     times: list[float] = field(default_factory=list)
     gaps: list[float] = field(default_factory=list)
     configs: list[np.ndarray] = field(default_factory=list)
+    velocities: list[np.ndarray | None] = field(default_factory=list)   # as reported
     problems: list[str] = field(default_factory=list)
     settings: DetectorSettings | None = None    # what the detector ran with
 
@@ -132,13 +134,31 @@ class ReplayResult:
         """
         return max(self.gaps, default=0.0)
 
+    @property
+    def peak_point_speed(self) -> float:
+        """
+        Return the fastest [m/s] any point of the arm moved (URDF collision shapes, flange).
+
+        What KUKA's Cartesian speed monitoring would compare with its limit (T1: README
+        "Pointing it at the real arm"), from the joint states' velocities, or the slope of
+        their positions where a state carries none.
+        """
+        if len(self.configs) < 2:
+            return 0.0
+        q, t = np.array(self.configs), np.array(self.times)
+        slope = np.zeros_like(q)
+        slope[1:] = np.diff(q, axis=0) / np.maximum(np.diff(t), 1e-9)[:, None]
+        v = np.array([slope[k] if v is None else v for k, v in enumerate(self.velocities)])
+        return float(point_speeds(iiwa_arm(), q, v).max())
+
     def summary(self) -> dict:
         """Return the JSON summary of ``probdis replay --json``."""
         return {'paths': self.paths,
                 'blocks': [{'t': b.t, 'x': b.x.tolist(), 'retreat': b.retreat}
                            for b in self.blocks],
                 'failures': len(self.fmap) if self.fmap is not None else 0,
-                'success': self.success, 'peak_gap_rad': self.peak_gap}
+                'success': self.success, 'peak_gap_rad': self.peak_gap,
+                'peak_point_speed_mps': self.peak_point_speed}
 
 
 def replay(bag: str | Path, joint_states_topic: str = JOINT_STATES,
@@ -310,6 +330,7 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
                                    f'from the first one, at {t:.3f} s')
         result.times.append(t)
         result.configs.append(q)
+        result.velocities.append(v)
         if detector is None:
             result.gaps.append(0.0)
             continue

@@ -105,12 +105,13 @@ def float_arguments(values: dict[str, float]) -> list[str]:
 #: nodes has only what its bag tells).
 PHYSICS_FIGURES = ('message', 'peak_contact_force_n', 'peak_table_force_n', 'lowest_m',
                    'peak_external_torque_nm', 'command_speed_peak', 'sent_speed_peak',
-                   'sim_time_s')
+                   'point_speed_peak_mps', 'sim_time_s')
 
 
 def offline_run(scenario: str, method: Method, run: int, velocity_scaling: float,
                 detection: dict[str, float], jtc_start: str = DEFAULT_JTC_START,
-                faults: dict[str, float] | None = None) -> dict:
+                faults: dict[str, float] | None = None,
+                cartesian_speed_limit: float = 0.0) -> dict:
     """
     Run one disentangling without DDS: the planner node's Run against JTC, filter and MuJoCo.
 
@@ -125,7 +126,8 @@ def offline_run(scenario: str, method: Method, run: int, velocity_scaling: float
     from probdis_ros.run import RunSettings
 
     settings = RunSettings(velocity_scaling=velocity_scaling,
-                           detection=DetectorSettings(**detection), jtc_start=jtc_start)
+                           detection=DetectorSettings(**detection), jtc_start=jtc_start,
+                           cartesian_speed_limit=cartesian_speed_limit)
     robot, physics = with_faults(faults or {}, RobotSettings(jtc_start=jtc_start, seed=run))
     episode = run_physics_episode(scenario, str(method), seed=run, run_settings=settings,
                                   robot_settings=robot, physics_settings=physics)
@@ -136,8 +138,9 @@ def offline_run(scenario: str, method: Method, run: int, velocity_scaling: float
 
 
 #: The value of a run setting (engine, velocity_scaling, offline, detection, jtc_start,
-#: faults) in records written before it was kept (none: not compared).
-LEGACY_SETTINGS = {'offline': False, 'detection': {}, 'jtc_start': 'measured', 'faults': {}}
+#: faults, cartesian_speed_limit) in records written before it was kept (none: not compared).
+LEGACY_SETTINGS = {'offline': False, 'detection': {}, 'jtc_start': 'measured', 'faults': {},
+                   'cartesian_speed_limit': 0.0}
 
 
 def check_settings(path: Path, records: list[dict], settings: dict) -> None:
@@ -163,7 +166,8 @@ def run_robot_experiment(out: Path, scenarios: list[str], methods: list[Method],
                          real_time_factor: float = 1.0, offline: bool = False,
                          detection: dict[str, float] | None = None,
                          jtc_start: str = DEFAULT_JTC_START,
-                         faults: dict[str, float] | None = None) -> list[dict]:
+                         faults: dict[str, float] | None = None,
+                         cartesian_speed_limit: float = 0.0) -> list[dict]:
     """
     Run what is missing of scenarios x methods x runs; return every record of DIR.
 
@@ -173,12 +177,14 @@ def run_robot_experiment(out: Path, scenarios: list[str], methods: list[Method],
     ``detection`` overrides detector thresholds (``DetectorSettings`` fields) either way;
     ``jtc_start`` is where the controller starts a command (and the planner models it);
     ``faults`` are the mock's (by the names of
-    :data:`~probdis_ros.physics.simulated_robot.FAULTS`) in every run.
+    :data:`~probdis_ros.physics.simulated_robot.FAULTS`) in every run;
+    ``cartesian_speed_limit`` [m/s] is the planner's (0: off).
     """
     detection = dict(detection or {})
     faults = dict(faults or {})
     settings = {'engine': engine, 'velocity_scaling': velocity_scaling, 'offline': offline,
-                'detection': detection, 'jtc_start': jtc_start, 'faults': faults}
+                'detection': detection, 'jtc_start': jtc_start, 'faults': faults,
+                'cartesian_speed_limit': cartesian_speed_limit}
 
     out.mkdir(parents=True, exist_ok=True)
     path = out / RUNS_FILE
@@ -195,11 +201,12 @@ def run_robot_experiment(out: Path, scenarios: list[str], methods: list[Method],
         """Run once, offline or through the nodes: a retry goes the same way."""
         if offline:     # any method: no planner node, whose parameters limit it
             return offline_run(scenario, method, run, velocity_scaling, detection, jtc_start,
-                               faults)
+                               faults, cartesian_speed_limit)
         from probdis_ros.ros.demo import run_demo
 
         args = (*planner_arguments(method, run, velocity_scaling),
-                *float_arguments(detection), '-p', f'bag_dir:={out / "bags"}')
+                *float_arguments({**detection, 'cartesian_speed_limit': cartesian_speed_limit}),
+                '-p', f'bag_dir:={out / "bags"}')
         return run_demo(scenario, timeout, quiet=True, extra_planner_args=args,
                         extra_mock_args=tuple(float_arguments(faults)), jtc_start=jtc_start,
                         **world_args)
@@ -221,7 +228,8 @@ def run_robot_experiment(out: Path, scenarios: list[str], methods: list[Method],
                       'success': result['success'], 'paths': result['paths'],
                       'failures': result['failures'], 'wall_s': time.monotonic() - t0,
                       'bag': result['bag'], 'offline': offline, 'detection': detection,
-                      'jtc_start': jtc_start, 'faults': faults}
+                      'jtc_start': jtc_start, 'faults': faults,
+                      'cartesian_speed_limit': cartesian_speed_limit}
             for name in PHYSICS_FIGURES:
                 if name in result:
                     record[name] = result[name]
@@ -284,6 +292,15 @@ def robot_table(records: list[dict], scenarios: list[str], methods: list[str],
                       if 'peak_contact_force_n' in r]
             peaks.append(f'{statistics.median(forces):.0f}' if forces else '-')
         lines.append('| peak contact force per run, median [N] | ' + ' | '.join(peaks) + ' |')
+    if any('point_speed_peak_mps' in r for r in records):
+        speeds = []
+        for method in methods:
+            peaks = [r['point_speed_peak_mps'] for r in cell(None, method)
+                     if 'point_speed_peak_mps' in r]
+            speeds.append(f'{statistics.median(peaks):.3f} / {max(peaks):.3f}' if peaks
+                          else '-')
+        lines.append('| fastest point of the arm per run, median / max [m/s] | ' +
+                     ' | '.join(speeds) + ' |')
     if left_out:
         lines.append(f'\n{len(left_out)} run(s) left out: the planner fell behind the '
                      f'simulation (joint states missed)')
