@@ -48,6 +48,8 @@ EDGE_SPACING = 0.01
 SAMPLING_MARGIN = 0.02
 #: [rad] the finite-difference step of the joint motion that gives the points' velocities
 DIFFERENCE_STEP = 1e-6
+#: configurations evaluated at once (a long episode's trace in blocks: bounded memory)
+BLOCK = 2048
 
 
 def _points(arm: SerialChainArm) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -80,6 +82,13 @@ def point_speeds(arm: SerialChainArm, configs: np.ndarray, velocities: np.ndarra
     """
     q = arm.as_batch(configs)
     qdot = np.asarray(velocities, dtype=float).reshape(q.shape)
+    points = _points(arm)
+    return np.concatenate([_point_speeds(arm, q[k:k + BLOCK], qdot[k:k + BLOCK], points)
+                           for k in range(0, len(q), BLOCK)] or [np.zeros(0)])
+
+
+def _point_speeds(arm: SerialChainArm, q: np.ndarray, qdot: np.ndarray,
+                  points: tuple[np.ndarray, np.ndarray, np.ndarray]) -> np.ndarray:
     size = np.linalg.norm(qdot, axis=1)
     moving = size > 0
     out = np.zeros(len(q))
@@ -88,7 +97,7 @@ def point_speeds(arm: SerialChainArm, configs: np.ndarray, velocities: np.ndarra
     direction = qdot[moving] / size[moving, None]
     p0, r0 = arm.joint_frames(q[moving])
     p1, r1 = arm.joint_frames(q[moving] + DIFFERENCE_STEP * direction)
-    links, local, radii = _points(arm)
+    links, local, radii = points
     x0 = p0[:, links] + np.einsum('nkab,kb->nka', r0[:, links], local)
     x1 = p1[:, links] + np.einsum('nkab,kb->nka', r1[:, links], local)
     linear = np.linalg.norm(x1 - x0, axis=2) / DIFFERENCE_STEP           # (N, points)
