@@ -76,6 +76,11 @@ def sampled(motion, dt: float = 1e-3) -> np.ndarray:
 def test_the_bound_holds_every_surface_point_and_is_reached_by_some():
     rng = np.random.default_rng(3)
     points = surface_points(rng)
+    # the points' frames are the kinematics' own: the tip where tip_frames puts it
+    q = np.clip(MIDDLE + rng.uniform(-1.5, 1.5, (5, 7)), ARM.lower, ARM.upper)
+    positions, rotations = ARM.joint_frames(q)
+    tips = positions[:, -1] + rotations[:, -1] @ points[1][0]
+    np.testing.assert_allclose(tips, ARM.tip_frames(q)[0], atol=1e-12)
     for _ in range(20):
         q = np.clip(MIDDLE + rng.uniform(-1.5, 1.5, 7), ARM.lower, ARM.upper)
         qdot = rng.uniform(-1.0, 1.0, 7)
