@@ -415,6 +415,7 @@ def test_a_cartesian_speed_limit_caps_every_point_of_the_arm_in_what_is_sent(ros
     velocities = np.array([p.velocities for p in points])
     fastest = point_speeds(iiwa_arm().on_table(ROBOT_TABLE), positions, velocities).max()
     assert 0.9 * limit <= fastest <= limit
+    assert ros.status['cartesian_speed_limit'] == limit     # and the bag says so
     assert ros.call('stop').success
 
 

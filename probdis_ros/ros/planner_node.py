@@ -1101,7 +1101,8 @@ class PlannerNode(Node):
         """Return the status document published on ~/status."""
         if self.run is not None:
             status = {**self.run.status(), 'detection': asdict(self.run.settings.detection),
-                      'jtc_start': self.run.settings.jtc_start}
+                      'jtc_start': self.run.settings.jtc_start,
+                      'cartesian_speed_limit': self.run.settings.cartesian_speed_limit}
         else:
             status = {'state': 'idle', 'paths': 0, 'last_plan_time_s': 0.0,
                       'last_replan_latency_s': None, 'replan_latencies_s': [],
