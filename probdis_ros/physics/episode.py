@@ -122,7 +122,7 @@ def run_physics_episode(scene: str, method: str | Method = 'probabilistic', seed
         robot_settings = RobotSettings(jtc_start=run_settings.jtc_start)
     robot, _ = build_robot('physics', scene, robot_settings, physics_settings)
     scene_doc = robot.engine.scene
-    arm = iiwa_arm().on_table(table, scene_doc.object_reach if table else 0.0)
+    arm = iiwa_arm().on_table(table, scene_doc.object_reach)
     fmap = method.failure_map(arm.task_space)
     # the planner node's default margin, so that offline runs plan as the node does
     rrt = rrt or RRTSettings(joint_margin=ROBOT_JOINT_MARGIN)

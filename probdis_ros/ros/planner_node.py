@@ -287,10 +287,12 @@ class PlannerNode(Node):
         self._run_settings()      # start-up values that do not go together: exit 2, named
         self.use_sim_time = bool(self.get_parameter('use_sim_time').value)
         self.arm = iiwa_arm(with_orientation=bool(self.get_parameter('orientation').value))
-        if self.get_parameter('table').value:
-            self.arm = self.arm.on_table(Table(self.get_parameter('table_height').value,
-                                               self.get_parameter('table_clearance').value),
-                                         self.get_parameter('object_radius').value)
+        # the object's ball is the arm's whether a table is known or not: the Cartesian speed
+        # limit keeps its points too
+        table = Table(self.get_parameter('table_height').value,
+                      self.get_parameter('table_clearance').value) \
+            if self.get_parameter('table').value else None
+        self.arm = self.arm.on_table(table, self.get_parameter('object_radius').value)
         self.joint_names = list(self.get_parameter('joint_names').value)
         goal = self.get_parameter('goal').value
         problem = self._goal_problem(goal)
