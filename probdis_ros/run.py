@@ -58,6 +58,7 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from enum import Enum
+import math
 import threading
 
 import numpy as np
@@ -170,8 +171,8 @@ class RunSettings:
         for name in ('acceleration_limit', 'jerk_limit', 'state_timeout', 'replan_tolerance'):
             if not getattr(self, name) > 0:
                 raise ValueError(f'{name} must be positive, got {getattr(self, name)}')
-        if not self.cartesian_speed_limit >= 0:
-            raise ValueError(f'cartesian_speed_limit must be >= 0 (0: off), got '
+        if not 0 <= self.cartesian_speed_limit < math.inf:
+            raise ValueError(f'cartesian_speed_limit must be finite and >= 0 (0: off), got '
                              f'{self.cartesian_speed_limit}')
         if self.jtc_start not in JTC_STARTS:
             raise ValueError(f'jtc_start must be one of {", ".join(JTC_STARTS)}, got '

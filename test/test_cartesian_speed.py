@@ -137,7 +137,8 @@ def test_bad_limits_are_refused():
         CartesianSpeedLimit(ARM, 0.0)
     with pytest.raises(ValueError, match='serial chain'):
         CartesianSpeedLimit(PlanarArm(), 0.2)
-    with pytest.raises(ValueError, match='cartesian_speed_limit'):
-        RunSettings(cartesian_speed_limit=-0.1)
+    for bad in (-0.1, np.inf, np.nan):
+        with pytest.raises(ValueError, match='cartesian_speed_limit'):
+            RunSettings(cartesian_speed_limit=bad)
     assert RunSettings().limits(ARM).cartesian is None
     assert RunSettings(cartesian_speed_limit=0.2).limits(ARM).cartesian.speed == 0.2
