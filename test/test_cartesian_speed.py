@@ -17,8 +17,8 @@ The Cartesian speed limit: every point of the arm, as the motion JTC runs moves 
 
 The checks move points of the arm's surface (its collision shapes' axis ends pushed out by
 their radius in many directions, the object's ball, the flange) through the commanded
-motion sampled every millisecond with JTC's interpolation, and difference their positions
-in time: independent of the bound the limit computes.
+motion sampled every millisecond or two with JTC's interpolation, and difference their
+positions in time: independent of the bound the limit computes.
 """
 
 from __future__ import annotations
