@@ -185,7 +185,7 @@ def least_probability_seconds(arm, fmap, reach: float) -> float:
     from probdis_ros.model.least_probability import least_probability, tip_ball
     from probdis_ros.planning import FailureProbabilityObjective
 
-    failures = FailureProbabilityObjective(reach=reach).coster(arm, fmap)._failures
+    failures = FailureProbabilityObjective(reach=reach).coster(arm, fmap).failure_arrays
     ball = tip_ball(arm)
     if failures[3][2] == 0.0 or ball is None:
         return 0.0

@@ -208,7 +208,9 @@ def test_the_robot_experiment_offline_is_deterministic_and_takes_detector_overri
     assert bad.returncode == 2 and "'ceiling=1': not a detector threshold" in bad.stderr
     for fault, said in (('lag=1', "'lag=1': not a fault of the mock"),
                         ('latency=-1', 'latency must be non-negative'),
-                        ('grasp_stiffness=x', "'x' is not a number")):
+                        ('grasp_stiffness=x', "'x' is not a number"),
+                        ('stiffness=0', 'stiffness must be 7 positive values'),
+                        ('damping_ratio=-1', 'damping_ratio must be >= 0')):
         bad = probdis('experiment', 'robot', '--offline', '--fault', fault,
                       '--out', str(tmp_path / 'c'), check=False)
         assert bad.returncode == 2 and said in bad.stderr, bad.stderr

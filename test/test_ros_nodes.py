@@ -343,10 +343,14 @@ def test_the_physics_mock_takes_its_faults_from_its_parameters(ros):
         Parameter('engine', value='physics'), Parameter('scene', value='demo_hook'),
         Parameter('armature', value=0.3), Parameter('object_mass_error', value=0.1),
         Parameter('latency', value=0.02), Parameter('noise', value=0.001),
-        Parameter('grasp_stiffness', value=20.0)]))
+        Parameter('grasp_stiffness', value=20.0), Parameter('stiffness', value=400.0),
+        Parameter('damping_ratio', value=1.0)]))
     robot = arm.robot
     np.testing.assert_array_equal(robot.engine.model.dof_armature[:7], [0.3] * 7)
     np.testing.assert_array_equal(robot.engine.model.jnt_stiffness[-3:], [20.0] * 3)
+    # the robot application's impedance: the actuators' gains and the damping law's ratio
+    np.testing.assert_array_equal(robot.engine.model.actuator_gainprm[:7, 0], [400.0] * 7)
+    assert robot.engine.settings.damping_ratio == 1.0
     assert robot.engine.settings.object_mass_error == 0.1
     assert (robot.settings.latency, robot.settings.noise) == (0.02, 0.001)
 

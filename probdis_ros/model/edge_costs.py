@@ -130,6 +130,11 @@ class EdgeCoster:
                        float(self.terms.cap), P_MAX)
 
     @property
+    def failure_arrays(self) -> tuple:
+        """Return the map as the kernels take it (points, directions, rotations, constants)."""
+        return self._failures
+
+    @property
     def compiled(self) -> bool:
         """Tell whether the costs come from the compiled kernels (not overridden)."""
         return type(self).costs is EdgeCoster.costs and type(self).cheapest is EdgeCoster.cheapest

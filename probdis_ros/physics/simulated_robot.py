@@ -293,12 +293,14 @@ ENGINES = ('physics', 'kinematic')
 #: driver's joint-state ``noise`` [rad] and ``latency`` [s] and KUKA's ``speed_monitor``
 #: [m/s] (RobotSettings), the load model's
 #: ``object_mass_error`` [kg], the motors' reflected inertia ``armature`` [kg m^2, every
-#: joint] and a grasp that gives, ``grasp_stiffness`` [Nm/rad] (PhysicsSettings; the
-#: physics arm only).
+#: joint] and a grasp that gives, ``grasp_stiffness`` [Nm/rad]; and the robot application's
+#: joint impedance, ``stiffness`` [Nm/rad, every joint] and ``damping_ratio``, which a user
+#: sets on the real arm (PhysicsSettings; the physics arm only).
 FAULTS = ('noise', 'latency', 'speed_monitor', 'object_mass_error', 'armature',
-          'grasp_stiffness')
+          'grasp_stiffness', 'stiffness', 'damping_ratio')
 #: The faults of the physics arm alone.
-PHYSICS_FAULTS = ('object_mass_error', 'armature', 'grasp_stiffness')
+PHYSICS_FAULTS = ('object_mass_error', 'armature', 'grasp_stiffness', 'stiffness',
+                  'damping_ratio')
 
 
 def with_faults(faults: Mapping[str, float], settings: RobotSettings | None = None
@@ -317,9 +319,11 @@ def with_faults(faults: Mapping[str, float], settings: RobotSettings | None = No
                     **{k: float(v) for k, v in faults.items()
                        if k in ('noise', 'latency', 'speed_monitor')})
     physics = replace(PhysicsSettings(), **{k: float(v) for k, v in faults.items()
-                                            if k in ('object_mass_error', 'grasp_stiffness')})
-    if 'armature' in faults:
-        physics = replace(physics, armature=(float(faults['armature']),) * 7)
+                                            if k in ('object_mass_error', 'grasp_stiffness',
+                                                     'damping_ratio')})
+    for name in ('armature', 'stiffness'):      # one value for every joint
+        if name in faults:
+            physics = replace(physics, **{name: (float(faults[name]),) * 7})
     return robot, physics
 
 

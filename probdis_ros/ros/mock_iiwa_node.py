@@ -32,7 +32,8 @@ With ``sim_time`` the mock runs on simulated time: it publishes ``/clock`` and r
 started with ``use_sim_time:=true`` can be tested many times faster than real time.
 Optional faults: joint-state noise, latency, the "echo" of a driver in open loop, and of
 the physics arm a load-model error, the motors' reflected inertia (``armature``) and a
-grasp that gives (``grasp_stiffness``).
+grasp that gives (``grasp_stiffness``); and the robot application's joint impedance
+(``stiffness``, ``damping_ratio``), which a user sets on the real arm.
 """
 
 from __future__ import annotations
@@ -111,6 +112,12 @@ class MockIiwa(Node):
         p('grasp_stiffness', PhysicsSettings().grasp_stiffness, _describe(
             'the grasp turns the object by torque / this [Nm/rad]; 0: the object is welded '
             'to the flange', 0.0, 1e5))
+        p('stiffness', PhysicsSettings().stiffness[0], _describe(
+            "the robot application's joint impedance stiffness, every joint [Nm/rad] (the lbr "
+            "stack's: 200)", 1.0, 5000.0))
+        p('damping_ratio', PhysicsSettings().damping_ratio, _describe(
+            "the robot application's joint impedance damping ratio (Sunrise takes 0.1 to 1.0; "
+            'its default 0.7)', 0.1, 1.0))
         p('sim_time', False, _describe('run on simulated time and publish /clock'))
         p('real_time_factor', 5.0, _describe('with sim_time: speed over the wall clock '
                                              '(at most); 0: as fast as possible', 0.0, 1000.0))

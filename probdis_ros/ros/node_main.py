@@ -68,7 +68,8 @@ def refuse_unknown_parameters(node: Node) -> None:
     rclpy drops such values without a word: a misspelt ``table_height`` on the real arm would
     run with the default table, 0 m.
     """
-    declared = set(node._parameters)              # rclpy keeps no public list of them
+    declared = set(node.get_parameters_by_prefix(''))   # every declared parameter
+    # rclpy has no public list of the start-up values (they are the node's overrides)
     unknown = sorted(set(node._parameter_overrides) - declared)
     if unknown:
         guesses = [difflib.get_close_matches(name, declared, n=1) for name in unknown]
