@@ -30,6 +30,8 @@ from pathlib import Path
 import sys
 from typing import TYPE_CHECKING
 
+from probdis_ros.ros import JOINT_STATES_TOPIC, TRAJECTORY_TOPIC  # plain names: no rclpy
+
 if TYPE_CHECKING:
     from probdis_ros.planning.methods import Method
 
@@ -1186,8 +1188,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     rp = sub.add_parser('replay', help='rerun the blocked-motion detector on a rosbag2 bag')
     rp.add_argument('bag', help='a rosbag2 bag: folder, .mcap or .db3 file')
-    rp.add_argument('--joint-states', default='/lbr/joint_states', help='joint-state topic')
-    rp.add_argument('--trajectory', default='/lbr/joint_trajectory_controller/joint_trajectory',
+    rp.add_argument('--joint-states', default=JOINT_STATES_TOPIC, help='joint-state topic')
+    rp.add_argument('--trajectory', default=TRAJECTORY_TOPIC,
                     help='commanded trajectory topic')
     rp.add_argument('--d-dist', type=float, help='d_dist of the detector [rad] (default: the '
                     'detector settings the recording planner ran with, or the defaults)')

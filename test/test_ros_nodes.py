@@ -35,7 +35,9 @@ from probdis_ros.ros.planner_node import PlannerNode
 from probdis_ros.sim.worlds import load_world
 import pytest
 from rclpy.parameter import Parameter
+from rclpy.qos import qos_profile_sensor_data
 from ros_harness import JOINTS, RosTest, wait_for
+from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 
 pytestmark = pytest.mark.ros
@@ -336,6 +338,33 @@ def test_the_mock_runs_a_trajectory_stamped_on_its_own_clock(ros, tmp_path):
     wait_for(lambda: publisher.get_subscription_count() > 0, 10, 'the mock')
     publisher.publish(msg)
     wait_for(lambda: abs(arm.q[0] - goal[0]) < 0.01, 10, 'the arm at the goal')
+
+
+def test_the_mock_names_its_joints_as_told_and_refuses_commands_to_others(ros, tmp_path):
+    # a robot_name other than lbr names the joints after it; the mock plays that arm
+    names = [f'iiwa_A{i}' for i in range(1, 8)]
+    arm = mock(ros, free_scenario(tmp_path), joint_names=names)
+    seen = []
+    ros.probe.create_subscription(JointState, '/lbr/joint_states',
+                                  lambda msg: seen.append(list(msg.name)),
+                                  qos_profile_sensor_data)
+    wait_for(lambda: seen, 10, 'a joint state')
+    assert seen[-1] == names
+    publisher = ros.probe.create_publisher(
+        JointTrajectory, '/lbr/joint_trajectory_controller/joint_trajectory', 10)
+    wait_for(lambda: publisher.get_subscription_count() > 0, 10, 'the mock')
+    start = arm.q.copy()
+    goal = start.copy()
+    goal[0] += 0.3
+    command = TrajectoryCommand(np.array([0.5]), goal[None])
+    publisher.publish(trajectory_msg(command, list(JOINTS)))     # the lbr names: refused
+    time.sleep(1.0)
+    np.testing.assert_array_equal(arm.q, start)
+    publisher.publish(trajectory_msg(command, names))
+    wait_for(lambda: abs(arm.q[0] - goal[0]) < 0.01, 10, 'the arm at the goal')
+    with pytest.raises(ValueError, match='joint_names must name 7 different joints'):
+        MockIiwa(context=ros.context, parameter_overrides=[
+            Parameter('engine', value='kinematic'), Parameter('joint_names', value=names[:6])])
 
 
 def test_the_physics_mock_takes_its_faults_from_its_parameters(ros):

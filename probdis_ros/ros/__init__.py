@@ -17,3 +17,12 @@
 #: The mock iiwa's node name: it plays joint_trajectory_controller, so the planner reads the
 #: controller's parameters there (``controller_node``).
 MOCK_NODE = 'mock_iiwa'
+
+# The lbr stack's names for a robot named ``lbr`` (its launch files' default), the defaults
+# of the planner, the mock and ``probdis replay`` (no rclpy here: the CLI reads them too).
+#: The arm's joints, in URDF order.
+JOINT_NAMES = tuple(f'lbr_A{i}' for i in range(1, 8))
+#: The driver's joint states (sensor_msgs/JointState).
+JOINT_STATES_TOPIC = '/lbr/joint_states'
+#: joint_trajectory_controller's command topic (trajectory_msgs/JointTrajectory).
+TRAJECTORY_TOPIC = '/lbr/joint_trajectory_controller/joint_trajectory'

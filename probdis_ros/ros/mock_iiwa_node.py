@@ -55,7 +55,7 @@ from probdis_ros.physics.simulated_robot import (
     RobotSettings,
     with_faults,
 )
-from probdis_ros.ros import MOCK_NODE
+from probdis_ros.ros import JOINT_NAMES, JOINT_STATES_TOPIC, MOCK_NODE, TRAJECTORY_TOPIC
 from probdis_ros.ros.markers import scene_markers
 from probdis_ros.ros.messages import command_from_msg
 from probdis_ros.ros.node_main import refuse_unknown_parameters, run_node
@@ -67,7 +67,6 @@ from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
-JOINTS = [f'lbr_A{i}' for i in range(1, 8)]
 #: The most simulated time [s] a late tick on wall time catches up at once.
 CATCH_UP = 0.1
 
@@ -127,15 +126,20 @@ class MockIiwa(Node):
         clock.read_only = False
         p('clock_offset', 0.0, clock)
         p('seed', 0, ParameterDescriptor(description='noise stream', read_only=True))
-        p('joint_states_topic', '/lbr/joint_states', _describe('sensor_msgs/JointState out'))
-        p('trajectory_topic', '/lbr/joint_trajectory_controller/joint_trajectory',
-          _describe('trajectory_msgs/JointTrajectory in'))
+        p('joint_states_topic', JOINT_STATES_TOPIC, _describe('sensor_msgs/JointState out'))
+        p('trajectory_topic', TRAJECTORY_TOPIC, _describe('trajectory_msgs/JointTrajectory in'))
+        p('joint_names', list(JOINT_NAMES), _describe(
+            'the 7 arm joints, in URDF order, as its joint states name them and its commands '
+            'must (the lbr stack names them after robot_name)'))
         refuse_unknown_parameters(self)
         value = lambda name: self.get_parameter(name).value   # noqa: E731
         if value('engine') not in ENGINES:
             raise ValueError(f'engine must be one of {", ".join(ENGINES)}, '
                              f'got {value("engine")!r}')
         self.arm = iiwa_arm()
+        self.joint_names = list(value('joint_names'))
+        if len(self.joint_names) != 7 or len(set(self.joint_names)) != 7:
+            raise ValueError(f'joint_names must name 7 different joints, got {self.joint_names}')
         settings, physics = with_faults(
             {name: value(name) for name in FAULTS},
             RobotSettings(period=1.0 / value('rate'), echo=value('echo'), seed=value('seed'),
@@ -187,7 +191,7 @@ class MockIiwa(Node):
 
     def _on_trajectory(self, msg: JointTrajectory) -> None:
         try:
-            command = command_from_msg(msg, JOINTS, self.arm.lower, self.arm.upper)
+            command = command_from_msg(msg, self.joint_names, self.arm.lower, self.arm.upper)
         except ValueError as err:
             self.get_logger().error(f'trajectory refused: {err}')
             return
@@ -246,7 +250,7 @@ class MockIiwa(Node):
             self.clock_pub.publish(Clock(clock=self._stamp(self.robot.time)))
         msg = JointState()
         msg.header.stamp = self._stamp(state.time)
-        msg.name = list(JOINTS)
+        msg.name = list(self.joint_names)
         msg.position = state.position.tolist()
         msg.velocity = state.velocity.tolist()
         msg.effort = state.effort.tolist()

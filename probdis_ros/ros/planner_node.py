@@ -63,6 +63,7 @@ from probdis_ros.planning import Disentangler, Method, RRTSettings, State
 from probdis_ros.planning.disentangle import DEFAULT_MIN_RETREAT
 from probdis_ros.planning.prob_rrt import ROBOT_JOINT_MARGIN
 from probdis_ros.planning.warm_up import warm_up
+from probdis_ros.ros import JOINT_NAMES, JOINT_STATES_TOPIC, TRAJECTORY_TOPIC
 from probdis_ros.ros.controller_check import ControllerSetting
 from probdis_ros.ros.markers import markers_msg
 from probdis_ros.ros.messages import stamp_seconds, trajectory_msg
@@ -156,11 +157,11 @@ def _unset(goal) -> bool:
 
 
 PARAMETERS = {
-    'joint_states_topic': ('/lbr/joint_states', ParameterDescriptor(
+    'joint_states_topic': (JOINT_STATES_TOPIC, ParameterDescriptor(
         description='sensor_msgs/JointState in (sensor-data QoS)')),
-    'trajectory_topic': ('/lbr/joint_trajectory_controller/joint_trajectory',
-                         ParameterDescriptor(description='trajectory_msgs/JointTrajectory out')),
-    'joint_names': ([f'lbr_A{i}' for i in range(1, 8)], ParameterDescriptor(
+    'trajectory_topic': (TRAJECTORY_TOPIC, ParameterDescriptor(
+        description='trajectory_msgs/JointTrajectory out')),
+    'joint_names': (list(JOINT_NAMES), ParameterDescriptor(
         description='the 7 arm joints, in URDF order (matched by name in joint states)')),
     'goal': (UNSET_GOAL, ParameterDescriptor(
         description='goal configuration [rad], 7 values within the joint limits (no default: '

@@ -48,6 +48,7 @@ from probdis_ros.motion.jtc import (
 )
 from probdis_ros.motion.state_check import StateCheck, values_by_name
 from probdis_ros.planning.disentangle import failure_from_block
+from probdis_ros.ros import JOINT_NAMES, JOINT_STATES_TOPIC, TRAJECTORY_TOPIC
 from probdis_ros.ros.bag_source import Bag, BagError
 from probdis_ros.ros.messages import (
     BadJointStateError,
@@ -55,10 +56,7 @@ from probdis_ros.ros.messages import (
     stamp_seconds,
 )
 
-JOINT_STATES = '/lbr/joint_states'
 FINISHED = ('succeeded', 'gave_up', 'stopped')
-TRAJECTORY = '/lbr/joint_trajectory_controller/joint_trajectory'
-JOINTS = [f'lbr_A{i}' for i in range(1, 8)]
 JOINT_STATE_TYPE = 'sensor_msgs/msg/JointState'
 TRAJECTORY_TYPE = 'trajectory_msgs/msg/JointTrajectory'
 #: [s] a state the planner recorded within this of the time the replay dates it at was dated
@@ -161,8 +159,8 @@ class ReplayResult:
                 'peak_point_speed_mps': self.peak_point_speed}
 
 
-def replay(bag: str | Path, joint_states_topic: str = JOINT_STATES,
-           trajectory_topic: str = TRAJECTORY, joint_names: list[str] | None = None,
+def replay(bag: str | Path, joint_states_topic: str = JOINT_STATES_TOPIC,
+           trajectory_topic: str = TRAJECTORY_TOPIC, joint_names: list[str] | None = None,
            settings: DetectorSettings | None = None, orientation: bool = True,
            overrides: dict | None = None) -> ReplayResult:
     """
@@ -175,7 +173,7 @@ def replay(bag: str | Path, joint_states_topic: str = JOINT_STATES,
     """
     if settings is None:
         detector_settings({}, overrides or {})
-    names = joint_names or JOINTS
+    names = list(joint_names or JOINT_NAMES)
     arm = iiwa_arm(with_orientation=orientation)
     result = ReplayResult(fmap=FailureMap(arm.task_space))
     try:
