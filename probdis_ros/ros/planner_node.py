@@ -297,8 +297,8 @@ class PlannerNode(Node):
         self.joint_names = list(self.get_parameter('joint_names').value)
         goal = self.get_parameter('goal').value
         problem = self._goal_problem(goal)
-        if len(self.joint_names) != 7:
-            raise ValueError('joint_names must name 7 joints')
+        if len(self.joint_names) != 7 or len(set(self.joint_names)) != 7:
+            raise ValueError(f'joint_names must name 7 different joints, got {self.joint_names}')
         if problem and not _unset(goal):
             raise ValueError(f'goal parameter: {problem}')     # exit 2, as any start-up value
         if problem:
