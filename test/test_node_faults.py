@@ -499,7 +499,7 @@ def planner_process(ros, tmp_path, *params, stderr=None):
     # rclpy drops a value for a parameter the node lacks: a misspelt name ran on the default
     ('table_heigth:=0.1', 'table_heigth (did you mean table_height?)'),
     # a joint named twice would be matched twice in every joint state
-    ("joint_names:=[lbr_A1, lbr_A1, lbr_A3, lbr_A4, lbr_A5, lbr_A6, lbr_A7]",
+    ('joint_names:=[lbr_A1, lbr_A1, lbr_A3, lbr_A4, lbr_A5, lbr_A6, lbr_A7]',
      'joint_names must name 7 different joints'),
     # rcl refuses a list of whole and decimal numbers before the node could say which
     ('goal:=[0.3, 0.2, 0, -1.1, 0, 0.6, 0]', 'with a decimal point'),
