@@ -22,7 +22,16 @@ MOCK_NODE = 'mock_iiwa'
 # of the planner, the mock and ``probdis replay`` (no rclpy here: the CLI reads them too).
 #: The arm's joints, in URDF order.
 JOINT_NAMES = tuple(f'lbr_A{i}' for i in range(1, 8))
+
 #: The driver's joint states (sensor_msgs/JointState).
 JOINT_STATES_TOPIC = '/lbr/joint_states'
 #: joint_trajectory_controller's command topic (trajectory_msgs/JointTrajectory).
 TRAJECTORY_TOPIC = '/lbr/joint_trajectory_controller/joint_trajectory'
+
+
+def checked_joint_names(names) -> list[str]:
+    """Return names as a list, or raise ValueError unless they name 7 different joints."""
+    names = list(names)
+    if len(names) != len(JOINT_NAMES) or len(set(names)) != len(names):
+        raise ValueError(f'joint_names must name 7 different joints, got {names}')
+    return names

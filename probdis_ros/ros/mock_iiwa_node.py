@@ -55,7 +55,13 @@ from probdis_ros.physics.simulated_robot import (
     RobotSettings,
     with_faults,
 )
-from probdis_ros.ros import JOINT_NAMES, JOINT_STATES_TOPIC, MOCK_NODE, TRAJECTORY_TOPIC
+from probdis_ros.ros import (
+    checked_joint_names,
+    JOINT_NAMES,
+    JOINT_STATES_TOPIC,
+    MOCK_NODE,
+    TRAJECTORY_TOPIC,
+)
 from probdis_ros.ros.markers import scene_markers
 from probdis_ros.ros.messages import command_from_msg
 from probdis_ros.ros.node_main import refuse_unknown_parameters, run_node
@@ -137,9 +143,7 @@ class MockIiwa(Node):
             raise ValueError(f'engine must be one of {", ".join(ENGINES)}, '
                              f'got {value("engine")!r}')
         self.arm = iiwa_arm()
-        self.joint_names = list(value('joint_names'))
-        if len(self.joint_names) != 7 or len(set(self.joint_names)) != 7:
-            raise ValueError(f'joint_names must name 7 different joints, got {self.joint_names}')
+        self.joint_names = checked_joint_names(value('joint_names'))
         settings, physics = with_faults(
             {name: value(name) for name in FAULTS},
             RobotSettings(period=1.0 / value('rate'), echo=value('echo'), seed=value('seed'),

@@ -63,7 +63,12 @@ from probdis_ros.planning import Disentangler, Method, RRTSettings, State
 from probdis_ros.planning.disentangle import DEFAULT_MIN_RETREAT
 from probdis_ros.planning.prob_rrt import ROBOT_JOINT_MARGIN
 from probdis_ros.planning.warm_up import warm_up
-from probdis_ros.ros import JOINT_NAMES, JOINT_STATES_TOPIC, TRAJECTORY_TOPIC
+from probdis_ros.ros import (
+    checked_joint_names,
+    JOINT_NAMES,
+    JOINT_STATES_TOPIC,
+    TRAJECTORY_TOPIC,
+)
 from probdis_ros.ros.controller_check import ControllerSetting
 from probdis_ros.ros.markers import markers_msg
 from probdis_ros.ros.messages import stamp_seconds, trajectory_msg
@@ -294,11 +299,9 @@ class PlannerNode(Node):
                       self.get_parameter('table_clearance').value) \
             if self.get_parameter('table').value else None
         self.arm = self.arm.on_table(table, self.get_parameter('object_radius').value)
-        self.joint_names = list(self.get_parameter('joint_names').value)
+        self.joint_names = checked_joint_names(self.get_parameter('joint_names').value)
         goal = self.get_parameter('goal').value
         problem = self._goal_problem(goal)
-        if len(self.joint_names) != 7 or len(set(self.joint_names)) != 7:
-            raise ValueError(f'joint_names must name 7 different joints, got {self.joint_names}')
         if problem and not _unset(goal):
             raise ValueError(f'goal parameter: {problem}')     # exit 2, as any start-up value
         if problem:
