@@ -430,6 +430,10 @@ def cmd_experiment_robot(args: argparse.Namespace) -> int:
                          f'(0, {MAX_VELOCITY_SCALING}]')
     if args.offline and not physics:
         raise UsageError('--offline runs the physics scenes (--engine physics)')
+    _not_negative(args.restarts, '--restarts')
+    if args.restarts and not args.offline:
+        raise UsageError('--restarts needs --offline (the mock node does not restart its '
+                         'driver)')
     detection = _detection_overrides(args.detection)
     faults = _fault_overrides(args.fault)
     physical = set(PHYSICS_FAULTS) & set(faults)
@@ -443,7 +447,8 @@ def cmd_experiment_robot(args: argparse.Namespace) -> int:
                                    real_time_factor=args.real_time_factor,
                                    offline=args.offline, detection=detection,
                                    jtc_start=args.jtc_start, faults=faults,
-                                   cartesian_speed_limit=_cartesian_speed(args))
+                                   cartesian_speed_limit=_cartesian_speed(args),
+                                   restarts=args.restarts)
     # the runs asked for only: a DIR may hold more runs (an earlier --runs), other scenes
     # or methods
     wanted = {(s, str(m), r) for s in scenarios for m in methods for r in range(runs)}
@@ -1328,6 +1333,11 @@ def build_parser() -> argparse.ArgumentParser:
                        "application's joint impedance: stiffness [Nm/rad], damping_ratio "
                        '(repeatable; README '
                        '"Parameters")')
+    robot.add_argument('--restarts', type=int, default=0, metavar='N',
+                       help='with --offline: when the driver stops the arm (its command '
+                       "guard, KUKA's speed monitoring), restart it and start the planner "
+                       'again, as an operator would, at most N times per run (its map kept; '
+                       'all starts together plan at most 20 paths; default 0)')
     robot.add_argument('--against', metavar='DIR', help='compare with the same runs in '
                        "another experiment's DIR (another setting, fault or commit): paired "
                        'by scene, method and run, with a bootstrap interval')

@@ -492,7 +492,10 @@ class Run:
             self.finish(State.STOPPED, f'joint states stopped arriving: none for {age:.2f} s '
                                        f'(state_timeout); has the driver stopped? (its log '
                                        f'says why: its command guard ends the FRI session on '
-                                       f'a joint faster than its URDF limit)')
+                                       f'a joint faster than its URDF limit, and so does a '
+                                       f"safety stop of KUKA's controller, such as T1's "
+                                       f'speed monitoring; once the driver is up again, the '
+                                       f'next start goes on with the failures learned)')
 
     def stop(self, reason: str = 'stopped on request') -> None:
         """End the run now, decelerating the arm to rest (or hold it where it is)."""

@@ -92,7 +92,7 @@ class RosTest:
 
     def call(self, service: str, timeout: float = 10.0) -> Trigger.Response:
         """
-        Call a planner Trigger service from the probe.
+        Call a planner Trigger service (or one named in full, ``/node/name``) from the probe.
 
         One client per service, kept: a client is ready once it has found the server, but
         the server must also find the client's reply reader, and a reply it sends before
@@ -103,8 +103,8 @@ class RosTest:
         """
         client = self._clients.get(service)
         if client is None:
-            client = self._clients[service] = self.probe.create_client(
-                Trigger, f'/probdis_planner/{service}')
+            name = service if service.startswith('/') else f'/probdis_planner/{service}'
+            client = self._clients[service] = self.probe.create_client(Trigger, name)
         if not client.service_is_ready():
             wait_for(client.service_is_ready, timeout, f'service {service}')
             time.sleep(REPLY_MATCH)

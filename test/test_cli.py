@@ -220,6 +220,12 @@ def test_the_robot_experiment_offline_is_deterministic_and_takes_detector_overri
     bad = probdis('experiment', 'robot', '--offline', '--engine', 'kinematic',
                   '--scenarios', 'demo_iiwa', '--out', str(tmp_path / 'c'), check=False)
     assert bad.returncode == 2 and '--offline runs the physics scenes' in bad.stderr
+    bad = probdis('experiment', 'robot', '--restarts', '2', '--out', str(tmp_path / 'c'),
+                  check=False)
+    assert bad.returncode == 2 and '--restarts needs --offline' in bad.stderr
+    bad = probdis('experiment', 'robot', '--offline', '--restarts', '-1',
+                  '--out', str(tmp_path / 'c'), check=False)
+    assert bad.returncode == 2 and '--restarts must be a number >= 0' in bad.stderr
     bad = probdis('experiment', 'robot', '--detection', 'gap_ceiling=0.05',
                   '--out', str(tmp_path / 'c'), check=False)
     assert bad.returncode == 2 and 'must exceed d_dist' in bad.stderr

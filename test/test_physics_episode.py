@@ -40,6 +40,35 @@ def test_an_offline_physics_episode_learns_from_a_block_and_is_reproducible():
     assert first.sim_time_s > 1.0      # (its speed: `probdis bench physics`, not a test)
 
 
+def test_a_driver_stopped_by_the_speed_monitoring_is_restarted_and_the_run_resumes():
+    # KUKA's speed monitoring at 0.1 m/s stops the arm on the demo's first path, before it
+    # meets the hook (its points reach about 0.6 m/s at scaling 0.2): every start is stopped
+    from probdis_ros.physics.episode import DRIVER_STOPPED, RESTART_AFTER
+    from probdis_ros.physics.simulated_robot import RobotSettings
+
+    monitored = RobotSettings(speed_monitor=0.1)
+    once = run_physics_episode('demo_hook', 'probabilistic', seed=1, max_paths=5,
+                               robot_settings=monitored)
+    assert not once.success and once.restarts == 0 and once.paths == 1 and not once.failures
+    assert once.message.count(DRIVER_STOPPED) == 1 and 'speed monitoring' in once.message
+    # restarted: each start plans from where the arm came to rest, and the starts together
+    # plan at most max_paths paths (here 3, before the 5 restarts allowed are used)
+    again = run_physics_episode('demo_hook', 'probabilistic', seed=1, max_paths=3,
+                                robot_settings=monitored, restarts=5)
+    assert not again.success and again.restarts == 2 and again.paths == 3
+    assert again.message.count(DRIVER_STOPPED) == 3 and not again.failures
+    assert again.summary()['driver_restarts'] == 2 and len(again.restarted_at) == 2
+    # the arm rested, held, before each restart; the last start planned from where it was
+    stopped, restarted = again.restarted_at[-1] - RESTART_AFTER, again.restarted_at[-1]
+    resting = again.configs[(again.times > stopped + 1.0) & (again.times <= restarted)]
+    assert np.abs(resting - resting[-1]).sum(axis=1).max() < 0.01
+    first_plan = again.loop.attempts[0].path[0]
+    np.testing.assert_allclose(first_plan, resting[-1], atol=0.01)
+    assert np.abs(first_plan - again.scene.start).sum() > 0.05    # not where the run began
+    with pytest.raises(ValueError, match='restarts'):
+        run_physics_episode('demo_hook', restarts=-1)
+
+
 def test_probdis_sim_engine_physics_prints_json_and_draws_the_scene(tmp_path):
     picture = tmp_path / 'run.png'
     # the paper's method meets the hook before it gets out (the default, informed, may turn

@@ -29,6 +29,7 @@ from probdis_ros.model import FailureMap, iiwa_arm
 from probdis_ros.motion.jtc import TrajectoryCommand
 from probdis_ros.physics import load_scene
 from probdis_ros.resources import scenario_path
+from probdis_ros.ros import MOCK_NODE
 from probdis_ros.ros.messages import trajectory_msg
 from probdis_ros.ros.mock_iiwa_node import MockIiwa
 from probdis_ros.ros.planner_node import PlannerNode
@@ -322,6 +323,36 @@ def test_joint_states_that_stop_arriving_stop_the_run(ros, tmp_path):
     wait_for(lambda: finished(ros), 5, 'run to stop')
     assert ros.status['state'] == 'stopped'
     assert 'stopped arriving' in ros.status['message']
+
+
+def test_after_the_speed_monitoring_stops_the_arm_a_restart_resumes_with_the_map(ros, tmp_path):
+    # T1: KUKA's monitoring stops the arm (here at 0.1 m/s, soon on the first path), the
+    # driver goes silent and the run stops; the operator restarts the driver, and the next
+    # ~/start plans from where the arm holds, with the failures learned before
+    node = planner(ros, tmp_path)
+    fmap = FailureMap(node.arm.task_space)
+    fmap.add(np.array([0.5, 0.0, 0.5]), np.array([0.0, 0.0, 1.0]), np.array([1.0, 0, 0, 0]))
+    node.fmap = fmap
+    arm = mock(ros, free_scenario(tmp_path), speed_monitor=0.1)
+    wait_for(lambda: ros.call('start').success, 20, 'start')
+    wait_for(lambda: arm.robot.stopped is not None, 20, 'the monitoring to stop the arm')
+    assert 'speed monitoring' in arm.robot.stopped
+    wait_for(lambda: finished(ros), 10, 'the run to stop')
+    said = ros.status['message']
+    assert ros.status['state'] == 'stopped' and 'stopped arriving' in said
+    assert 'speed monitoring' in said and 'the next start goes on' in said
+    assert ros.call(f'/{MOCK_NODE}/restart_driver').success
+    assert not ros.call(f'/{MOCK_NODE}/restart_driver').success   # running again
+    held = np.array(arm.q)
+    assert np.abs(held - START).sum() > 0.01        # it had moved before the stop
+    answers = []
+    wait_for(lambda: answers.append(ros.call('start')) or answers[-1].success, 10,
+             'start after the restart')
+    began = answers[-1].message
+    assert 'disentangling from' in began and ros.status['failures'] == 1
+    np.testing.assert_allclose(json.loads(began.split('from ')[1].split(';')[0]), held,
+                               atol=2e-3)
+    assert ros.call('stop').success
 
 
 def test_the_mock_runs_a_trajectory_stamped_on_its_own_clock(ros, tmp_path):

@@ -162,6 +162,19 @@ def test_kukas_speed_monitoring_stops_a_fast_arm_and_lets_a_capped_motion_run():
             robot.step()
         if cap is None:
             assert robot.stopped is not None and 'speed monitoring' in robot.stopped
+            # the operator's restart: the arm settles, held; the driver comes up where it
+            # is, JTC holds there (no command of before survives), joint states flow again
+            for _ in range(200):
+                robot.step()
+            silent = robot.joint_state()
+            robot.restart()
+            held = robot.engine.q.copy()
+            for _ in range(50):
+                robot.step()
+            assert robot.stopped is None and robot.joint_state().time > silent.time + 2.0
+            np.testing.assert_allclose(robot.engine.q, held, atol=1e-3)
+            with pytest.raises(RuntimeError, match='nothing to restart'):
+                robot.restart()
         else:
             assert robot.stopped is None
             np.testing.assert_allclose(robot.engine.q, goal, atol=0.01)

@@ -41,6 +41,13 @@ from probdis_ros.planning.disentangle import DEFAULT_MIN_RETREAT
 from probdis_ros.planning.prob_rrt import ROBOT_JOINT_MARGIN
 from probdis_ros.run import Learned, PlanFrom, Run, RunSettings, Send
 
+#: [s] of simulated time the arm rests, held, between a stop of the driver and its restart
+#: (``restarts``): the operator's restart takes longer, and the arm has settled by then.
+RESTART_AFTER = 2.0
+#: What an episode's message says of each stop of the driver (its guard, KUKA's speed
+#: monitoring), before the reason.
+DRIVER_STOPPED = 'the driver stopped:'
+
 
 @dataclass
 class PhysicsEpisode:
@@ -70,6 +77,13 @@ class PhysicsEpisode:
     # the fastest any point of the arm (collision shapes, the object's ball, the flange)
     # moved [m/s], of its true motion: what KUKA's Cartesian speed monitoring sees
     point_speed_peak: float = 0.0
+    # when the driver was restarted after it stopped the arm (``restarts``) [s, simulated]
+    restarted_at: list[float] = field(default_factory=list)
+
+    @property
+    def restarts(self) -> int:
+        """Return how often the driver was restarted after it stopped the arm."""
+        return len(self.restarted_at)
 
     def summary(self) -> dict:
         """
@@ -81,7 +95,8 @@ class PhysicsEpisode:
         the mock's table top, which the planner keeps them clear of.
         ``peak_external_torque_nm``: per joint, the largest external torque the contacts
         exerted, what a real iiwa's collision detection (if its application sets one)
-        compares with its thresholds.
+        compares with its thresholds.  ``driver_restarts``: how often the driver that stopped
+        the arm was restarted and the planner started again (``restarts``).
         """
         return {'success': self.success, 'outcome': self.outcome, 'paths': self.paths,
                 'failures': len(self.failures), 'message': self.message,
@@ -96,6 +111,7 @@ class PhysicsEpisode:
                 'command_speed_peak': round(self.command_speed_peak, 3),
                 'sent_speed_peak': round(self.sent_speed_peak, 3),
                 'point_speed_peak_mps': round(self.point_speed_peak, 3),
+                'driver_restarts': self.restarts,
                 'plan_times_s': self.plan_times_s}
 
 
@@ -106,7 +122,7 @@ def run_physics_episode(scene: str, method: str | Method = 'probabilistic', seed
                         physics_settings: PhysicsSettings | None = None,
                         time_limit: float = 600.0, goal_tolerance: float = 0.04,
                         min_retreat: float = DEFAULT_MIN_RETREAT,
-                        table: Table | None = ROBOT_TABLE) -> PhysicsEpisode:
+                        table: Table | None = ROBOT_TABLE, restarts: int = 0) -> PhysicsEpisode:
     """
     Disentangle a physics scene from its start to its goal; reproducible from seed.
 
@@ -114,7 +130,15 @@ def run_physics_episode(scene: str, method: str | Method = 'probabilistic', seed
     holds it) above ``table``, as the planner node does with its parameters.  The driver and
     the physics arm run with ``robot_settings`` and ``physics_settings`` (their defaults:
     the ideal mock, JTC as ``run_settings`` models it).
+
+    ``restarts``: when the driver stops the arm (its command guard, KUKA's speed
+    monitoring), the operator lets the arm come to rest for :data:`RESTART_AFTER`, restarts
+    the driver and starts the planner again, at most this many times: the map keeps what
+    was learned (the node keeps it on disk), the new run plans from where the arm is, and
+    all runs together plan at most ``max_paths`` paths.
     """
+    if restarts < 0:
+        raise ValueError(f'restarts must be >= 0, got {restarts}')
     wall = time.perf_counter()
     method = Method.resolve(method) if isinstance(method, str) else method
     if robot_settings is None and run_settings is not None:
@@ -126,11 +150,19 @@ def run_physics_episode(scene: str, method: str | Method = 'probabilistic', seed
     fmap = method.failure_map(arm.task_space)
     # the planner node's default margin, so that offline runs plan as the node does
     rrt = rrt or RRTSettings(joint_margin=ROBOT_JOINT_MARGIN)
-    loop = method.disentangler(arm, method.planner(arm, rrt), scene_doc.goal, fmap,
-                               max_paths=max_paths, seed=seed, goal_tolerance=goal_tolerance,
-                               min_retreat=min_retreat)
-    run = Run(arm, loop, run_settings or RunSettings())
-    failures, commands = [], []
+    planner = method.planner(arm, rrt)
+
+    def start_run(paths: int) -> tuple[Disentangler, Run]:
+        """Start a run, as ``~/start`` does: a new loop on the map, from where the arm is."""
+        loop = method.disentangler(arm, planner, scene_doc.goal, fmap, max_paths=paths,
+                                   seed=seed, goal_tolerance=goal_tolerance,
+                                   min_retreat=min_retreat)
+        run = Run(arm, loop, run_settings or RunSettings())
+        state = robot.joint_state()
+        run.start(state.time, state.position)
+        return loop, run
+
+    failures, commands, loops, messages, restarted_at = [], [], [], [], []
     times, configs, velocities, gaps, forces, table_forces = [], [], [], [], [], []
     torque_peak = np.zeros(arm.n_joints)
 
@@ -146,39 +178,57 @@ def run_physics_episode(scene: str, method: str | Method = 'probabilistic', seed
             elif isinstance(action, Learned):
                 failures.append(action.event)
 
-    state = robot.joint_state()
-    run.start(state.time, state.position)
-    act()
-    while run.active and robot.time < time_limit:
-        robot.step()
-        if robot.stopped is None:       # a stopped driver reports nothing more
-            state = robot.joint_state()
-            run.on_joint_state(state.time, state.position, state.velocity)
-        run.tick(robot.time)
-        act()
+    def record(run: Run | None) -> None:
         times.append(robot.time)
         configs.append(robot.engine.q.copy())
         velocities.append(robot.engine.qdot)
-        gaps.append(run.detector.gap if run.detector is not None else 0.0)
+        gaps.append(run.detector.gap if run is not None and run.detector is not None else 0.0)
         contacts = robot.engine.contacts()
         forces.append(sum(c.force for c in contacts))
         table_forces.append(sum(c.force for c in contacts if c.scene_geom == TABLE))
         if contacts:
             np.maximum(torque_peak, np.abs(robot.engine.tau_external), out=torque_peak)
-    if run.active:
-        run.finish(State.STOPPED, f'time limit of {time_limit:.0f} s simulated reached')
-    if robot.stopped is not None:
-        run.message += f' (the driver stopped: {robot.stopped})'
+
+    paths_used = 0
+    while True:
+        loop, run = start_run(max_paths - paths_used)
+        loops.append(loop)
+        act()
+        while run.active and robot.time < time_limit:
+            robot.step()
+            if robot.stopped is None:       # a stopped driver reports nothing more
+                state = robot.joint_state()
+                run.on_joint_state(state.time, state.position, state.velocity)
+            run.tick(robot.time)
+            act()
+            record(run)
+        if run.active:
+            run.finish(State.STOPPED, f'time limit of {time_limit:.0f} s simulated reached')
+        paths_used += loop.paths_tried
+        if robot.stopped is None:
+            messages.append(run.message)
+            break
+        messages.append(f'{run.message} ({DRIVER_STOPPED} {robot.stopped})')
+        if len(loops) > restarts or paths_used >= max_paths:
+            break
+        rest_until = robot.time + RESTART_AFTER
+        while robot.time < min(rest_until, time_limit):
+            robot.step()
+            record(None)
+        if robot.time >= time_limit:
+            break
+        robot.restart()
+        restarted_at.append(robot.time)
 
     return PhysicsEpisode(
         success=run.phase.value == 'succeeded', outcome=run.phase.value,
-        paths=loop.paths_tried, failures=failures, times=np.array(times),
+        paths=paths_used, failures=failures, times=np.array(times),
         configs=np.array(configs).reshape(-1, arm.n_joints), gaps=np.array(gaps),
         contact_force=np.array(forces), table_force=np.array(table_forces),
         external_torque_peak=torque_peak,
-        plan_times_s=loop.plan_times,
+        plan_times_s=[t for each in loops for t in each.plan_times],
         sim_time_s=robot.time, wall_time_s=time.perf_counter() - wall, scene=scene_doc,
-        loop=loop, message=run.message, commands=commands,
+        loop=loop, message='; then '.join(messages), commands=commands, restarted_at=restarted_at,
         command_speed_peak=robot.command_speed_peak, sent_speed_peak=robot.sent_speed_peak,
         point_speed_peak=float(point_speeds(arm, np.array(configs), np.array(velocities))
                                .max(initial=0.0)) if configs else 0.0)

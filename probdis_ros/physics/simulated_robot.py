@@ -173,7 +173,6 @@ class SimulatedRobot:
                  settings: RobotSettings | None = None) -> None:
         self.engine = engine
         self.settings = settings or RobotSettings()
-        self.controller = TrajectoryController(self.settings.period, self.settings.jtc_start)
         self.filter = FirstOrderFilter(self.settings.filter_tau, self.settings.period)
         self.rng = np.random.default_rng(self.settings.seed)
         from probdis_ros.model import iiwa_arm
@@ -182,19 +181,36 @@ class SimulatedRobot:
                                       self._limits.upper, self.settings.period) \
             if self.settings.limiter else None
         engine.reset(start)
-        self.filter.reset(engine.q)
-        if self.limiter is not None:
-            self.limiter.reset(engine.q)
-        self.commanded = engine.q.copy()      # JTC's last position command
-        self._sent_before = engine.q.copy()   # the driver's command one period earlier
-        self.stopped: str | None = None       # why the driver's command guard stopped it
         # the fastest change of a joint's command in one period, over its velocity limit:
         # JTC's output and the driver's (after the limiter and its filter); above 1 the
         # command stepped
         self.command_speed_peak = 0.0
         self.sent_speed_peak = 0.0
+        self._activate()
+
+    def _activate(self) -> None:
+        """Start the driver and JTC where the arm is: JTC holds it until a command comes."""
+        q = self.engine.q
+        self.controller = TrajectoryController(self.settings.period, self.settings.jtc_start)
+        self.filter.reset(q)
+        if self.limiter is not None:
+            self.limiter.reset(q)
+        self.commanded = q.copy()             # JTC's last position command
+        self._sent_before = q.copy()          # the driver's command one period earlier
+        self.stopped: str | None = None       # why the driver's command guard stopped it
         self._reported: deque[JointStateSample] = deque()
         self._report()
+
+    def restart(self) -> None:
+        """
+        Restart a stopped driver, as the operator does after a safety stop.
+
+        The robot application and the driver come up again where the arm holds: JTC holds
+        the measured position, no command of before survives, joint states flow again.
+        """
+        if self.stopped is None:
+            raise RuntimeError('the driver is running: nothing to restart')
+        self._activate()
 
     @property
     def time(self) -> float:

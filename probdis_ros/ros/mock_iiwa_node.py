@@ -33,7 +33,10 @@ started with ``use_sim_time:=true`` can be tested many times faster than real ti
 Optional faults: joint-state noise, latency, the "echo" of a driver in open loop, and of
 the physics arm a load-model error, the motors' reflected inertia (``armature``) and a
 grasp that gives (``grasp_stiffness``); and the robot application's joint impedance
-(``stiffness``, ``damping_ratio``), which a user sets on the real arm.
+(``stiffness``, ``damping_ratio``), which a user sets on the real arm.  When the driver's
+command guard or KUKA's speed monitoring (``speed_monitor``) stops it, no joint state
+follows until ``~/restart_driver`` (std_srvs/Trigger) brings it up again where the arm
+holds, as the operator restarts the robot application and the driver.
 """
 
 from __future__ import annotations
@@ -70,6 +73,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, qos_profile_sensor_data, QoSProfile
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
+from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
@@ -166,6 +170,7 @@ class MockIiwa(Node):
         self.clock_pub = self.create_publisher(Clock, '/clock', 10) if self.sim_time else None
         self.create_subscription(JointTrajectory, value('trajectory_topic'),
                                  self._on_trajectory, 10)
+        self.create_service(Trigger, '~/restart_driver', self._on_restart_driver)
         scene = getattr(self.robot.engine, 'scene', None)
         if scene is not None:         # for RViz: what the planner cannot see
             latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -187,6 +192,19 @@ class MockIiwa(Node):
             if param.name == 'clock_offset':
                 self.epoch += param.value - self.get_parameter('clock_offset').value
         return SetParametersResult(successful=True)
+
+    def _on_restart_driver(self, _request: Trigger.Request, response: Trigger.Response
+                           ) -> Trigger.Response:
+        """Bring a stopped driver up again where the arm holds (the operator's restart)."""
+        if self.robot.stopped is None:
+            response.success, response.message = False, 'the driver is running'
+            return response
+        self.robot.restart()
+        self.driver_down = False
+        response.success = True
+        response.message = f'driver restarted at {np.round(self.q, 3).tolist()}'
+        self.get_logger().info(response.message)
+        return response
 
     @property
     def q(self) -> np.ndarray:

@@ -105,20 +105,22 @@ def float_arguments(values: dict[str, float]) -> list[str]:
 #: nodes has only what its bag tells).
 PHYSICS_FIGURES = ('message', 'peak_contact_force_n', 'peak_table_force_n', 'lowest_m',
                    'peak_external_torque_nm', 'command_speed_peak', 'sent_speed_peak',
-                   'point_speed_peak_mps', 'sim_time_s')
+                   'point_speed_peak_mps', 'sim_time_s', 'driver_restarts')
 
 
 def offline_run(scenario: str, method: Method, run: int, velocity_scaling: float,
                 detection: dict[str, float], jtc_start: str = DEFAULT_JTC_START,
                 faults: dict[str, float] | None = None,
-                cartesian_speed_limit: float = 0.0) -> dict:
+                cartesian_speed_limit: float = 0.0, restarts: int = 0) -> dict:
     """
     Run one disentangling without DDS: the planner node's Run against JTC, filter and MuJoCo.
 
     Deterministic (the run index seeds the planner and the joint-state noise; simulated time
     stands still while it plans) and blind to the machine's load: the honest table when the
     nodes cannot keep up.  ``faults``: the mock's
-    (:data:`~probdis_ros.physics.simulated_robot.FAULTS`), as its node takes them.
+    (:data:`~probdis_ros.physics.simulated_robot.FAULTS`), as its node takes them;
+    ``restarts``: how often the operator restarts a driver that stopped the arm and starts
+    the planner again (:func:`~probdis_ros.physics.episode.run_physics_episode`).
     """
     from probdis_ros.motion.detector import DetectorSettings
     from probdis_ros.physics.episode import run_physics_episode
@@ -130,7 +132,8 @@ def offline_run(scenario: str, method: Method, run: int, velocity_scaling: float
                            cartesian_speed_limit=cartesian_speed_limit)
     robot, physics = with_faults(faults or {}, RobotSettings(jtc_start=jtc_start, seed=run))
     episode = run_physics_episode(scenario, str(method), seed=run, run_settings=settings,
-                                  robot_settings=robot, physics_settings=physics)
+                                  robot_settings=robot, physics_settings=physics,
+                                  restarts=restarts)
     summary = episode.summary()
     return {'success': summary['success'], 'paths': summary['paths'],
             'failures': summary['failures'], 'bag': None,
@@ -138,9 +141,10 @@ def offline_run(scenario: str, method: Method, run: int, velocity_scaling: float
 
 
 #: The value of a run setting (engine, velocity_scaling, offline, detection, jtc_start,
-#: faults, cartesian_speed_limit) in records written before it was kept (none: not compared).
+#: faults, cartesian_speed_limit, restarts) in records written before it was kept (none: not
+#: compared).
 LEGACY_SETTINGS = {'offline': False, 'detection': {}, 'jtc_start': 'measured', 'faults': {},
-                   'cartesian_speed_limit': 0.0}
+                   'cartesian_speed_limit': 0.0, 'restarts': 0}
 
 
 def check_settings(path: Path, records: list[dict], settings: dict) -> None:
@@ -167,7 +171,7 @@ def run_robot_experiment(out: Path, scenarios: list[str], methods: list[Method],
                          detection: dict[str, float] | None = None,
                          jtc_start: str = DEFAULT_JTC_START,
                          faults: dict[str, float] | None = None,
-                         cartesian_speed_limit: float = 0.0) -> list[dict]:
+                         cartesian_speed_limit: float = 0.0, restarts: int = 0) -> list[dict]:
     """
     Run what is missing of scenarios x methods x runs; return every record of DIR.
 
@@ -178,13 +182,17 @@ def run_robot_experiment(out: Path, scenarios: list[str], methods: list[Method],
     ``jtc_start`` is where the controller starts a command (and the planner models it);
     ``faults`` are the mock's (by the names of
     :data:`~probdis_ros.physics.simulated_robot.FAULTS`) in every run;
-    ``cartesian_speed_limit`` [m/s] is the planner's (0: off).
+    ``cartesian_speed_limit`` [m/s] is the planner's (0: off); ``restarts`` (offline only)
+    how often a driver that stopped the arm is restarted and the planner started again.
     """
+    if restarts and not offline:
+        raise ValueError('restarts are simulated offline only (the mock node does not '
+                         'restart its driver)')
     detection = dict(detection or {})
     faults = dict(faults or {})
     settings = {'engine': engine, 'velocity_scaling': velocity_scaling, 'offline': offline,
                 'detection': detection, 'jtc_start': jtc_start, 'faults': faults,
-                'cartesian_speed_limit': cartesian_speed_limit}
+                'cartesian_speed_limit': cartesian_speed_limit, 'restarts': restarts}
 
     out.mkdir(parents=True, exist_ok=True)
     path = out / RUNS_FILE
@@ -201,7 +209,7 @@ def run_robot_experiment(out: Path, scenarios: list[str], methods: list[Method],
         """Run once, offline or through the nodes: a retry goes the same way."""
         if offline:     # any method: no planner node, whose parameters limit it
             return offline_run(scenario, method, run, velocity_scaling, detection, jtc_start,
-                               faults, cartesian_speed_limit)
+                               faults, cartesian_speed_limit, restarts)
         from probdis_ros.ros.demo import run_demo
 
         args = (*planner_arguments(method, run, velocity_scaling),
@@ -229,7 +237,7 @@ def run_robot_experiment(out: Path, scenarios: list[str], methods: list[Method],
                       'failures': result['failures'], 'wall_s': time.monotonic() - t0,
                       'bag': result['bag'], 'offline': offline, 'detection': detection,
                       'jtc_start': jtc_start, 'faults': faults,
-                      'cartesian_speed_limit': cartesian_speed_limit}
+                      'cartesian_speed_limit': cartesian_speed_limit, 'restarts': restarts}
             for name in PHYSICS_FIGURES:
                 if name in result:
                     record[name] = result[name]
@@ -301,6 +309,14 @@ def robot_table(records: list[dict], scenarios: list[str], methods: list[str],
                           else '-')
         lines.append('| fastest point of the arm per run, median / max [m/s] | ' +
                      ' | '.join(speeds) + ' |')
+    from probdis_ros.physics.episode import DRIVER_STOPPED
+
+    if any(DRIVER_STOPPED in r.get('message', '') for r in records):
+        stops = []
+        for method in methods:
+            counts = [r.get('message', '').count(DRIVER_STOPPED) for r in cell(None, method)]
+            stops.append(f'{sum(c > 0 for c in counts)} / {sum(counts)}')
+        lines.append('| runs the driver stopped / its stops | ' + ' | '.join(stops) + ' |')
     if left_out:
         lines.append(f'\n{len(left_out)} run(s) left out: the planner fell behind the '
                      f'simulation (joint states missed)')
