@@ -43,8 +43,8 @@ def test_an_offline_physics_episode_learns_from_a_block_and_is_reproducible():
 def test_a_driver_stopped_by_the_speed_monitoring_is_restarted_and_the_run_resumes():
     # KUKA's speed monitoring at 0.1 m/s stops the arm on the demo's first path, before it
     # meets the hook (its points reach about 0.6 m/s at scaling 0.2): every start is stopped
-    from probdis_ros.physics.episode import DRIVER_STOPPED, RESTART_AFTER
-    from probdis_ros.physics.simulated_robot import RobotSettings
+    from probdis_ros.physics.episode import RESTART_AFTER
+    from probdis_ros.physics.simulated_robot import DRIVER_STOPPED, RobotSettings
 
     monitored = RobotSettings(speed_monitor=0.1)
     once = run_physics_episode('demo_hook', 'probabilistic', seed=1, max_paths=5,

@@ -325,15 +325,21 @@ def test_joint_states_that_stop_arriving_stop_the_run(ros, tmp_path):
     assert 'stopped arriving' in ros.status['message']
 
 
-def test_after_the_speed_monitoring_stops_the_arm_a_restart_resumes_with_the_map(ros, tmp_path):
-    # T1: KUKA's monitoring stops the arm (here at 0.1 m/s, soon on the first path), the
+@pytest.mark.parametrize('desired', [False, True], ids=['measured_start', 'desired_start'])
+def test_after_the_speed_monitoring_stops_the_arm_a_restart_resumes_with_the_map(
+        ros, tmp_path, desired):
+    # T1: KUKA's monitoring stops the arm (here at 0.2 m/s, soon on the first path), the
     # driver goes silent and the run stops; the operator restarts the driver, and the next
-    # ~/start plans from where the arm holds, with the failures learned before
-    node = planner(ros, tmp_path)
+    # ~/start plans from where the arm holds, with the failures learned before.  The
+    # restarted controller holds the measured position, also where JTC starts each command
+    # from its last one: the planner must not take the command it sent before the stop for
+    # what JTC holds (its first command went there in one period, 34 x the velocity limit)
+    jtc = {'interpolate_from_desired_state': desired}
+    node = planner(ros, tmp_path, **jtc, controller_node=f'/{MOCK_NODE}')
     fmap = FailureMap(node.arm.task_space)
     fmap.add(np.array([0.5, 0.0, 0.5]), np.array([0.0, 0.0, 1.0]), np.array([1.0, 0, 0, 0]))
     node.fmap = fmap
-    arm = mock(ros, free_scenario(tmp_path), speed_monitor=0.1)
+    arm = mock(ros, free_scenario(tmp_path), speed_monitor=0.2, **jtc)
     wait_for(lambda: ros.call('start').success, 20, 'start')
     wait_for(lambda: arm.robot.stopped is not None, 20, 'the monitoring to stop the arm')
     assert 'speed monitoring' in arm.robot.stopped
@@ -344,14 +350,17 @@ def test_after_the_speed_monitoring_stops_the_arm_a_restart_resumes_with_the_map
     assert ros.call(f'/{MOCK_NODE}/restart_driver').success
     assert not ros.call(f'/{MOCK_NODE}/restart_driver').success   # running again
     held = np.array(arm.q)
-    assert np.abs(held - START).sum() > 0.01        # it had moved before the stop
-    answers = []
-    wait_for(lambda: answers.append(ros.call('start')) or answers[-1].success, 10,
-             'start after the restart')
-    began = answers[-1].message
-    assert 'disentangling from' in began and ros.status['failures'] == 1
-    np.testing.assert_allclose(json.loads(began.split('from ')[1].split(';')[0]), held,
-                               atol=2e-3)
+    assert np.abs(held - START).max() > 0.005       # it had moved before the stop
+    sent = len(ros.trajectories)
+    arm.robot.command_speed_peak = 0.0
+    wait_for(lambda: ros.call('start').success, 10, 'start after the restart')
+    assert ros.status['failures'] == 1
+    wait_for(lambda: len(ros.trajectories) > sent, 10, 'the first command after the restart')
+    first = ros.trajectories[sent][1].points[0]
+    np.testing.assert_allclose(first.positions, held, atol=1e-3)
+    time.sleep(0.3)
+    # JTC's command moved on from the arm within the velocity limits (one period each)
+    assert arm.robot.command_speed_peak <= 1.0
     assert ros.call('stop').success
 
 

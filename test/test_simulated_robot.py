@@ -180,6 +180,29 @@ def test_kukas_speed_monitoring_stops_a_fast_arm_and_lets_a_capped_motion_run():
             np.testing.assert_allclose(robot.engine.q, goal, atol=0.01)
 
 
+def test_a_driver_stopped_while_the_arm_presses_on_something_cannot_be_restarted_there():
+    # the demo's hook pressed up into its bar (the straight move to the goal), then KUKA's
+    # monitoring stops the arm: on its brakes the hook stays pressed, the robot application
+    # would not switch to joint impedance with the bar pushing back, so the operator's
+    # restart is refused, saying why (the mock's held arm relaxes: the stop's torque counts)
+    from probdis_ros.physics.simulated_robot import RESTART_TORQUE
+
+    scene = load_scene('demo_hook')
+    robot, _ = build_robot('physics', scene, RobotSettings())
+    command_to(robot, scene.goal, 0.2)
+    for _ in range(150):
+        robot.step()
+    assert np.abs(robot.engine.tau_external).max() > 5 * RESTART_TORQUE
+    robot.settings = replace(robot.settings, speed_monitor=1e-4)   # any motion trips it
+    while robot.stopped is None:
+        robot.step()
+    for _ in range(200):
+        robot.step()
+    with pytest.raises(RuntimeError, match='refuses joint impedance: an external torque'):
+        robot.restart()
+    assert robot.stopped is not None
+
+
 def test_the_command_guard_stops_the_driver_on_a_command_past_a_limit():
     # without ros2_control's joint limiter (enforce_command_limits false) the command
     # reaches the driver's guard, which ends the session; with it (the lbr stack's

@@ -146,6 +146,7 @@ class StateCheck:
         self.refused_at = -np.inf        # host time of the last refusal
         self.refusal = ''                # its reason
         self.refused = 0
+        self.streams = 0                 # streams heard: a restarted driver starts a new one
 
     def check(self, now: float, names: Sequence[str], positions: Sequence[float],
               velocities: Sequence[float] = (), stamp: float = 0.0, sequence: int = 0,
@@ -275,6 +276,7 @@ class StateCheck:
             raise BadJointStateError('no receive time')
         if now - self.last_time > self.silence:
             self.last_q, self.last_stamp = None, 0.0      # a new stream
+            self.streams += 1
             self.last_sequence, self.quickest = 0, np.inf
             self.span_quickest, self.span_start = np.inf, 0.0
         if now < self.last_time:

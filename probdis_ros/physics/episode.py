@@ -35,18 +35,16 @@ from probdis_ros.model.table import ROBOT_TABLE, Table
 from probdis_ros.motion.cartesian_speed import point_speeds
 from probdis_ros.physics.model import TABLE
 from probdis_ros.physics.settings import PhysicsSettings
-from probdis_ros.physics.simulated_robot import build_robot, RobotSettings
+from probdis_ros.physics.simulated_robot import build_robot, DRIVER_STOPPED, RobotSettings
 from probdis_ros.planning import Disentangler, Method, RRTSettings, State
 from probdis_ros.planning.disentangle import DEFAULT_MIN_RETREAT
 from probdis_ros.planning.prob_rrt import ROBOT_JOINT_MARGIN
 from probdis_ros.run import Learned, PlanFrom, Run, RunSettings, Send
 
-#: [s] of simulated time the arm rests, held, between a stop of the driver and its restart
-#: (``restarts``): the operator's restart takes longer, and the arm has settled by then.
+#: [s] of simulated time the arm rests, held, once the run stopped on the silent driver and
+#: before the operator restarts it (``restarts``): a real restart takes longer, and the arm
+#: has settled by then.
 RESTART_AFTER = 2.0
-#: What an episode's message says of each stop of the driver (its guard, KUKA's speed
-#: monitoring), before the reason.
-DRIVER_STOPPED = 'the driver stopped:'
 
 
 @dataclass
@@ -135,7 +133,8 @@ def run_physics_episode(scene: str, method: str | Method = 'probabilistic', seed
     monitoring), the operator lets the arm come to rest for :data:`RESTART_AFTER`, restarts
     the driver and starts the planner again, at most this many times: the map keeps what
     was learned (the node keeps it on disk), the new run plans from where the arm is, and
-    all runs together plan at most ``max_paths`` paths.
+    all runs together plan at most ``max_paths`` paths.  A restart the robot application
+    refuses (the arm presses on something: ``SimulatedRobot.restart``) ends the episode.
     """
     if restarts < 0:
         raise ValueError(f'restarts must be >= 0, got {restarts}')
@@ -216,8 +215,13 @@ def run_physics_episode(scene: str, method: str | Method = 'probabilistic', seed
             robot.step()
             record(None)
         if robot.time >= time_limit:
+            messages.append(f'time limit of {time_limit:.0f} s simulated reached')
             break
-        robot.restart()
+        try:
+            robot.restart()
+        except RuntimeError as refused:
+            messages.append(f'no restart: {refused}')
+            break
         restarted_at.append(robot.time)
 
     return PhysicsEpisode(

@@ -89,6 +89,13 @@ class Engine(Protocol):
         """Move toward setpoint for duration seconds of simulated time."""
 
 
+#: What an episode's message says of each stop of the driver (its guard, KUKA's speed
+#: monitoring), before the reason.
+DRIVER_STOPPED = 'the driver stopped:'
+#: [Nm] the robot application refuses to switch to joint impedance while the external torque
+#: on a joint is above this (current lbr stack releases; README "Pointing it at the real
+#: arm"), so a driver stopped while the arm presses on something cannot be restarted there.
+RESTART_TORQUE = 2.0
 #: The kinematic arm follows its setpoint with this first-order lag [s], as a servo does: an
 #: arm that copied the driver's command at once could not be told from a driver that echoes
 #: it (the planner's echo test), and no real arm does.
@@ -198,6 +205,7 @@ class SimulatedRobot:
         self.commanded = q.copy()             # JTC's last position command
         self._sent_before = q.copy()          # the driver's command one period earlier
         self.stopped: str | None = None       # why the driver's command guard stopped it
+        self._stop_torque = np.zeros(len(q))  # the contacts' torques then [Nm]
         self._reported: deque[JointStateSample] = deque()
         self._report()
 
@@ -207,10 +215,28 @@ class SimulatedRobot:
 
         The robot application and the driver come up again where the arm holds: JTC holds
         the measured position, no command of before survives, joint states flow again.
+        RuntimeError if the driver runs, or if the robot application would refuse to
+        switch to joint impedance: an external torque above :data:`RESTART_TORQUE` on a
+        joint (the physics arm's contacts), as current lbr stack releases refuse it.  A
+        real arm's safety stop puts it on its brakes, which keep a contact it pressed at
+        the stop pressing; the mock holds the stopped arm with its impedance, which lets
+        the contact relax: so the torque at the stop counts, or now's if larger.
         """
         if self.stopped is None:
             raise RuntimeError('the driver is running: nothing to restart')
+        external = np.maximum(self._stop_torque, self._external_torque())
+        if external.max() > RESTART_TORQUE:
+            joint = int(external.argmax())
+            raise RuntimeError(
+                f'the robot application refuses joint impedance: an external torque of '
+                f'{external[joint]:.1f} Nm on A{joint + 1}, above {RESTART_TORQUE:g} Nm (the '
+                f'arm pressed on something when it stopped, and its brakes hold it so: move '
+                f'it free first)')
         self._activate()
+
+    def _external_torque(self) -> np.ndarray:
+        """Return |the torque contacts exert on each joint| [Nm] (0 on the kinematic arm)."""
+        return np.abs(getattr(self.engine, 'tau_external', np.zeros(len(self.engine.q))))
 
     @property
     def time(self) -> float:
@@ -244,6 +270,7 @@ class SimulatedRobot:
             self.stopped = self._guard(sent, before)
             if self.stopped is not None:
                 self._held = self.engine.q.copy()
+                self._stop_torque = self._external_torque()
                 return
         self._report()
 

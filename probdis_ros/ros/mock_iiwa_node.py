@@ -36,7 +36,8 @@ grasp that gives (``grasp_stiffness``); and the robot application's joint impeda
 (``stiffness``, ``damping_ratio``), which a user sets on the real arm.  When the driver's
 command guard or KUKA's speed monitoring (``speed_monitor``) stops it, no joint state
 follows until ``~/restart_driver`` (std_srvs/Trigger) brings it up again where the arm
-holds, as the operator restarts the robot application and the driver.
+holds, as the operator restarts the robot application and the driver (refused, as the
+robot application refuses it, while the arm presses on something with more than 2 Nm).
 """
 
 from __future__ import annotations
@@ -196,10 +197,11 @@ class MockIiwa(Node):
     def _on_restart_driver(self, _request: Trigger.Request, response: Trigger.Response
                            ) -> Trigger.Response:
         """Bring a stopped driver up again where the arm holds (the operator's restart)."""
-        if self.robot.stopped is None:
-            response.success, response.message = False, 'the driver is running'
+        try:
+            self.robot.restart()
+        except RuntimeError as refused:
+            response.success, response.message = False, str(refused)
             return response
-        self.robot.restart()
         self.driver_down = False
         response.success = True
         response.message = f'driver restarted at {np.round(self.q, 3).tolist()}'

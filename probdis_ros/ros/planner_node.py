@@ -341,6 +341,7 @@ class PlannerNode(Node):
         self.measured_velocity: np.ndarray | None = None
         self.measured_at = -np.inf
         self.run: Run | None = None
+        self.run_stream = 0             # the joint-state stream the last run began on
         self.stall_max = 0.0          # [s] the longest the executor stalled in the run
         self.ticked_at = time.monotonic()
         self._ended_run: Run | None = None
@@ -721,10 +722,14 @@ class PlannerNode(Node):
                             min_retreat=self.get_parameter('min_retreat').value)
         settings = self._run_settings()
         # the last command, where the arm may still run it; with a desired start always: JTC
-        # holds it and starts the next command from it
-        keep = self.run is not None and (own or settings.jtc_start == 'desired')
+        # holds it and starts the next command from it.  Unless the joint states went silent
+        # since that run began (a new stream): the driver was restarted (after a safety stop,
+        # say), and a controller that comes up again holds the measured position
+        same_driver = self.state_check.streams == self.run_stream
+        keep = self.run is not None and same_driver and (own or settings.jtc_start == 'desired')
         running = self.run.trajectory if keep else None
         running_sent_at = self.run.sent_at if keep else None
+        self.run_stream = self.state_check.streams
         self.run = Run(self.arm, loop, settings, clock=self._now)
         self.stall_max = 0.0
         self.plan_future = None

@@ -309,7 +309,7 @@ def robot_table(records: list[dict], scenarios: list[str], methods: list[str],
                           else '-')
         lines.append('| fastest point of the arm per run, median / max [m/s] | ' +
                      ' | '.join(speeds) + ' |')
-    from probdis_ros.physics.episode import DRIVER_STOPPED
+    from probdis_ros.physics.simulated_robot import DRIVER_STOPPED
 
     if any(DRIVER_STOPPED in r.get('message', '') for r in records):
         stops = []
