@@ -64,6 +64,7 @@ def test_colcon_build_installs_the_executable_and_the_share_files(tmp_path):
     share = install / 'probdis_ros' / 'share' / 'probdis_ros'
     assert (share / 'urdf' / 'iiwa14.urdf').exists()
     assert (share / 'config' / 'planner.yaml').exists()
+    assert (share / 'config' / 'planner_t1.yaml').exists()
     assert (share / 'config' / 'scenes' / 'demo_hook.yaml').exists()
     assert (share / 'config' / 'launch' / 'probdis_mock.launch.py').exists()
     assert (share / 'config' / 'rviz' / 'probdis.rviz').exists()
@@ -75,12 +76,15 @@ def test_colcon_build_installs_the_executable_and_the_share_files(tmp_path):
     info = json.loads(run.stdout)
     assert info['found_by'] == 'ament index'
     assert Path(info['share']) == share
-    # ros2 run probdis_ros planner_node, without the ros2 CLI: the installed executable
+    # ros2 run probdis_ros planner_node, without the ros2 CLI: the installed executable, with
+    # the README's parameter files for the real arm in T1 (a name the node does not declare
+    # would end it, exit 2)
     node = install / 'probdis_ros' / 'lib' / 'probdis_ros' / 'planner_node'
     env['ROS_DOMAIN_ID'] = str(next_domain())
     started = subprocess.Popen(
         ['bash', '-c', f'source {install}/setup.bash && exec {node} --ros-args --params-file '
-                       f'{share}/config/planner.yaml -p map_file:={tmp_path}/map.json'],
+                       f'{share}/config/planner.yaml --params-file '
+                       f'{share}/config/planner_t1.yaml -p map_file:={tmp_path}/map.json'],
         env=env, stderr=subprocess.PIPE, text=True)
     try:
         # a fresh install compiles the planner's kernels at the first start (tens of seconds)

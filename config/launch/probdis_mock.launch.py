@@ -45,6 +45,7 @@ def _share() -> Path:
 
 def _nodes(context, *args, **kwargs):
     from probdis_ros.physics import load_scene
+    from probdis_ros.ros import default_map_file
     share = _share()
     scene = LaunchConfiguration('scene').perform(context)
     world = load_scene(scene)
@@ -59,6 +60,10 @@ def _nodes(context, *args, **kwargs):
              parameters=[str(share / 'config' / 'planner.yaml'),
                          {'goal': goal, 'use_sim_time': sim,
                           'controller_node': '/mock_iiwa',
+                          # a map of the mock's own: failures met in a scene must never
+                          # steer the real arm, whose planner reads the default map
+                          'map_file': str(Path(default_map_file()).with_name(
+                              'mock_failure_map.json')),
                           # kept above the table, as the demo and the experiments keep it
                           'object_radius': float(world.object_reach)}]),
         Node(package='robot_state_publisher', executable='robot_state_publisher',

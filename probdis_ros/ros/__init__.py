@@ -14,6 +14,8 @@
 
 """ROS 2 adapters: the planner node, the mock iiwa node and their command-line clients."""
 
+import os
+
 #: The mock iiwa's node name: it plays joint_trajectory_controller, so the planner reads the
 #: controller's parameters there (``controller_node``).
 MOCK_NODE = 'mock_iiwa'
@@ -35,3 +37,9 @@ def checked_joint_names(names) -> list[str]:
     if len(names) != len(JOINT_NAMES) or len(set(names)) != len(names):
         raise ValueError(f'joint_names must name 7 different joints, got {names}')
     return names
+
+
+def default_map_file() -> str:
+    """Return ``$ROS_HOME/probdis/failure_map.json`` (ROS_HOME defaults to ~/.ros)."""
+    home = os.environ.get('ROS_HOME') or os.path.join(os.path.expanduser('~'), '.ros')
+    return os.path.join(home, 'probdis', 'failure_map.json')

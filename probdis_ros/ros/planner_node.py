@@ -65,6 +65,7 @@ from probdis_ros.planning.prob_rrt import ROBOT_JOINT_MARGIN
 from probdis_ros.planning.warm_up import warm_up
 from probdis_ros.ros import (
     checked_joint_names,
+    default_map_file,
     JOINT_NAMES,
     JOINT_STATES_TOPIC,
     TRAJECTORY_TOPIC,
@@ -144,12 +145,6 @@ def _int(text: str, low: int, high: int) -> ParameterDescriptor:
         IntegerRange(from_value=low, to_value=high)])
 
 
-def default_map_file() -> str:
-    """Return ``$ROS_HOME/probdis/failure_map.json`` (ROS_HOME defaults to ~/.ros)."""
-    home = os.environ.get('ROS_HOME') or os.path.join(os.path.expanduser('~'), '.ros')
-    return os.path.join(home, 'probdis', 'failure_map.json')
-
-
 #: The goal parameter's value until it is set (a double array, so that ros2 param set takes
 #: one): a goal must be given, since a default would send the arm there (upright, all zeros)
 UNSET_GOAL = [math.nan] * 7
@@ -183,7 +178,8 @@ PARAMETERS = {
     'cartesian_speed_limit': (RUN.cartesian_speed_limit, _float(
         'fastest [m/s] any point of the arm (its URDF collision shapes, the ball of '
         "object_radius, the flange) moves on a path or retreat; in KUKA's T1 (250 mm/s) "
-        'set 0.2; 0: the joint limits only', 0.0, 10.0)),
+        'set 0.15 with gap_ceiling 0.15 and joint_gap_ceiling 0.08 (config/planner_t1.yaml); '
+        '0: the joint limits only', 0.0, 10.0)),
     'd_dist': (DETECT.d_dist, _float('L1 gap [rad] above which a stalled motion is blocked',
                                      0.001, 1.0)),
     'stall_time': (DETECT.stall_time, _float('time without progress that counts as stalled '
