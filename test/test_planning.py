@@ -316,6 +316,44 @@ def test_samples_keep_the_margin_and_no_margin_is_the_plain_uniform_draw():
     assert np.all(shrunk.min(axis=0) < low + 0.01) and np.all(shrunk.max(axis=0) > high - 0.01)
 
 
+@pytest.mark.parametrize('method', ['probabilistic', 'informed'])
+def test_a_joint_range_keeps_the_trees_probes_and_paths_in_the_cells_room(method):
+    # A1 within +-0.6 rad keeps the arm in front of its base: every node of both trees,
+    # every probe and every via point of the path stays within the range; a start outside
+    # it (the arm where it is) plans into it
+    from probdis_ros.planning import Method
+
+    arm = arm_for_setting('3d-orient')
+    lower, upper = arm.lower.copy(), arm.upper.copy()
+    lower[0], upper[0] = -0.6, 0.6
+    settings = RRTSettings(joint_margin=ROBOT_JOINT_MARGIN, joint_lower=tuple(lower),
+                           joint_upper=tuple(upper))
+    planner = Method.parse(method).planner(arm, settings)
+    low, high = np.maximum(lower, arm.lower + ROBOT_JOINT_MARGIN), \
+        np.minimum(upper, arm.upper - ROBOT_JOINT_MARGIN)
+    np.testing.assert_array_equal((planner.low, planner.high), (low, high))
+    fmap = scattered_map(arm, np.random.default_rng(3), 19)
+    start = np.array([1.0, 0.5, 0.0, -1.2, 0.0, 0.8, 0.0])        # A1 outside the range
+    goal = np.array([-0.4, 0.3, 0.2, -1.0, 0.1, 0.9, 0.2])
+    for seed in range(3):
+        plan = planner.plan(start, goal, fmap, np.random.default_rng(seed))
+        inner = plan.path[1:]
+        assert np.all((inner >= low - 1e-12) & (inner <= high + 1e-12)), inner[:, 0]
+        trees = planner.grow(start, goal, planner.objective.coster(arm, fmap),
+                             np.random.default_rng(seed))
+        for tree in trees:
+            nodes = tree.nodes[1:tree.size]
+            assert len(nodes) and np.all((nodes >= low - 1e-12) & (nodes <= high + 1e-12))
+    # without a range the same planner goes beyond it
+    free = Method.parse(method).planner(arm, RRTSettings(joint_margin=ROBOT_JOINT_MARGIN))
+    trees = free.grow(start, goal, free.objective.coster(arm, fmap), np.random.default_rng(0))
+    assert np.abs(trees[0].nodes[1:trees[0].size, 0]).max() > 0.6
+    with pytest.raises(ValueError, match='no room'):
+        ProbRRT(arm, RRTSettings(joint_lower=tuple(upper), joint_upper=tuple(lower)))
+    with pytest.raises(ValueError, match='7 values'):
+        ProbRRT(arm, RRTSettings(joint_lower=(0.0, 1.0)))
+
+
 def test_a_margin_without_room_or_below_zero_is_refused():
     with pytest.raises(ValueError, match='joint_margin'):
         RRTSettings(joint_margin=-0.01)

@@ -219,6 +219,28 @@ def test_bad_goals_are_refused(ros, tmp_path):
     assert np.allclose(node.get_parameter('goal').value, GOAL)
 
 
+def test_a_joint_range_narrows_the_planner_and_refuses_goals_and_ranges_outside(ros, tmp_path):
+    # the cell's room: A1 within [-0.3, 0.5] (the goal's A1 is 0.3); NaN: the joint's limit
+    nan = math.nan
+    node = planner(ros, tmp_path, joint_lower=[-0.3] + [nan] * 6,
+                   joint_upper=[0.5] + [nan] * 6)
+    made = node._make_planner()
+    assert (made.low[0], made.high[0]) == (-0.3, 0.5)
+    np.testing.assert_allclose(made.high[1:], node.arm.upper[1:] - 0.035)
+    for name, value, said in (('goal', [-0.5, *GOAL[1:].tolist()], 'outside [-0.3, 0.5]'),
+                              ('joint_upper', [3.5] + [nan] * 6, 'outside its limits'),
+                              ('joint_lower', [0.6] + [nan] * 6, 'is not below joint_upper'),
+                              ('joint_lower', [0.0] * 6, 'needs 7 values')):
+        result = node.set_parameters([Parameter(name, value=value)])[0]
+        assert not result.successful and said in result.reason, result.reason
+    # narrowed past the goal: ~/start says so
+    assert node.set_parameters([Parameter('joint_upper', value=[0.2] + [nan] * 6)])[0].successful
+    steady_states(ros)
+    wait_for(lambda: node.measured is not None, 10, 'joint states')
+    response = ros.call('start')
+    assert not response.success and '(joint_lower, joint_upper)' in response.message
+
+
 def test_the_method_parameter_takes_the_planners_informed_ideas_and_refuses_the_maps(
         ros, tmp_path):
     from probdis_ros.planning.probes import ProbeRRT

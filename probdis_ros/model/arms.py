@@ -171,9 +171,13 @@ class Arm(ABC):
         The same numbers as ``rng.uniform(lower, upper, (n, n_joints))`` (``low + (high -
         low) u``, one draw per value), in a third of the time.
         """
-        low = self.lower + margin
+        return self.random_within(rng, n, self.lower + margin, self.upper - margin)
+
+    def random_within(self, rng: np.random.Generator, n: int, low: np.ndarray,
+                      high: np.ndarray) -> np.ndarray:
+        """Draw n configurations uniformly within [low, high] (``low + (high - low) u``)."""
         out = rng.random((n, self.n_joints))
-        out *= self.upper - margin - low
+        out *= high - low
         out += low
         return out
 

@@ -116,6 +116,10 @@ class RRTSettings:
     closest_candidates: int = 10    # k nearest in joint space are costed; 0: every node (paper)
     connect_candidates: int = 10    # likewise for Connect
     joint_margin: float = 0.0       # [rad] kept from every joint limit; 0: none (the paper)
+    # [rad] a narrower range the trees keep to, per joint (a cell's room: A1 within +-1.5
+    # keeps the arm in front of its base); None: the joint limits
+    joint_lower: tuple[float, ...] | None = None
+    joint_upper: tuple[float, ...] | None = None
 
     def __post_init__(self) -> None:
         """Refuse settings the planner cannot work with."""
@@ -162,13 +166,27 @@ class ProbRRT:
         # the compiled loop where it can run (a chain arm, the compiled coster); the Python
         # loop is its reference, bit for bit
         self.compiled = compiled and arm.kernel_params()[0] != PLANAR
-        margin = self.settings.joint_margin
+        s = self.settings
+        margin = s.joint_margin
         if np.any(self.arm.upper - self.arm.lower <= 2 * margin):
             raise ValueError(f'joint_margin {margin} leaves no room between the joint limits')
-        # the box that samples, steps and smoothing keep to (a start or goal may lie
+        # the box that samples, steps, probes and smoothing keep to (a start or goal may lie
         # between it and the limits: the trees grow from it into the box)
         self.low = self.arm.lower + margin
         self.high = self.arm.upper - margin
+        for name, bound in (('joint_lower', s.joint_lower), ('joint_upper', s.joint_upper)):
+            if bound is not None and np.shape(bound) != (self.arm.n_joints,):
+                raise ValueError(f'{name} must give {self.arm.n_joints} values, got {bound}')
+        if s.joint_lower is not None:
+            self.low = np.maximum(self.low, np.asarray(s.joint_lower, dtype=float))
+        if s.joint_upper is not None:
+            self.high = np.minimum(self.high, np.asarray(s.joint_upper, dtype=float))
+        if np.any(self.high <= self.low):
+            joint = int(np.argmax(self.low - self.high))
+            raise ValueError(f'A{joint + 1}: joint_lower and joint_upper leave no room within '
+                             f'the joint limits (less joint_margin)')
+        # steps are clipped into the box where it is narrower than the joint limits
+        self.clips = margin > 0 or s.joint_lower is not None or s.joint_upper is not None
         self._warm_up()
 
     def _warm_up(self) -> None:
@@ -264,7 +282,7 @@ class ProbRRT:
         """
         s = self.settings
         to_goal = rng.random(iterations) < s.p_goal
-        samples = self.arm.random_configurations(rng, iterations * s.n_random, s.joint_margin)
+        samples = self.arm.random_within(rng, iterations * s.n_random, self.low, self.high)
         # only the samples of iterations that do not aim at the other root are looked at
         return to_goal, samples, self.arm.sample_positions(samples,
                                                            np.repeat(~to_goal, s.n_random))
@@ -279,7 +297,7 @@ class ProbRRT:
             grow_kernel(tree.nodes, tree.positions, tree.parent, tree.edge, tree.costs,
                         tree.first_child, tree.next_sibling, tree.counts, to_goal, samples,
                         positions, 0, iterations, other_root, s.n_random, s.step, self.low,
-                        self.high, s.joint_margin > 0, s.rewire_factor, s.rewire_radius,
+                        self.high, self.clips, s.rewire_factor, s.rewire_radius,
                         s.closest_candidates, tree.reverse, *coster.kernel_args())
             return
         for k in range(iterations):
@@ -311,7 +329,7 @@ class ProbRRT:
         closest = candidates[best]
         new = np.empty(self.arm.n_joints)
         if step_toward(tree.nodes[closest], target, s.step, new, self.low, self.high,
-                       s.joint_margin > 0):
+                       self.clips):
             self._insert(tree, new, closest, coster)
 
     def _neighbours(self, tree: Tree, config: np.ndarray, closest: int) -> np.ndarray:

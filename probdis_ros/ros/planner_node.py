@@ -150,6 +150,10 @@ def _int(text: str, low: int, high: int) -> ParameterDescriptor:
 UNSET_GOAL = [math.nan] * 7
 
 
+#: joint_lower / joint_upper until set: every joint's limit
+UNSET_RANGE = [math.nan] * 7
+
+
 def _unset(goal) -> bool:
     """Tell whether a goal parameter's value is UNSET_GOAL (7 NaN)."""
     goal = np.asarray(goal, dtype=float)
@@ -238,6 +242,14 @@ PARAMETERS = {
     'step': (1.0, _float('longest new tree edge [rad]', 0.01, 10.0)),
     'joint_margin': (ROBOT_JOINT_MARGIN, _float(
         'distance [rad] that samples and via points keep from every joint limit', 0.0, 0.5)),
+    'joint_lower': (UNSET_RANGE, ParameterDescriptor(
+        description='the room of the cell: lowest position [rad] per joint that the planned '
+                    'paths go to (7 values; NaN: the joint limit), e.g. A1 -1.5 with '
+                    'joint_upper A1 1.5 keeps the arm in front of its base; the goal must lie '
+                    'within')),
+    'joint_upper': (UNSET_RANGE, ParameterDescriptor(
+        description='highest position [rad] per joint that the planned paths go to (7 '
+                    'values; NaN: the joint limit)')),
     # 0 until a budget is shown to disentangle better (README "Planning and simulation")
     'plan_time': (0.0, _float('anytime budget [s]: the trees keep growing in rounds of K '
                               'while it lasts; 0: one round of K (the paper)', 0.0, 60.0)),
@@ -455,6 +467,33 @@ class PlannerNode(Node):
 
     # -- parameters --------------------------------------------------------------------
 
+    def _joint_range(self, changes: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """
+        Return the planned paths' room per joint, (lower, upper), from the parameters.
+
+        NaN stands for the joint's limit.  ValueError for a range that is not 7 values,
+        outside the joint limits, or empty.
+        """
+        bounds = []
+        for name, limit in (('joint_lower', self.arm.lower), ('joint_upper', self.arm.upper)):
+            value = (changes or {}).get(name, self.get_parameter(name).value)
+            value = np.asarray(value, dtype=float)
+            if value.shape != (7,):
+                raise ValueError(f'{name} needs 7 values, has {value.size}')
+            bounds.append(np.where(np.isnan(value), limit, value))
+        lower, upper = bounds
+        for bound, name in ((lower, 'joint_lower'), (upper, 'joint_upper')):
+            j = self.arm.joint_outside(bound)
+            if j is not None:
+                raise ValueError(f'{name}: {self.arm.joint_names[j]} at {bound[j]:.4g} rad is '
+                                 f'outside its limits [{self.arm.lower[j]:.4f}, '
+                                 f'{self.arm.upper[j]:.4f}]')
+        if np.any(upper <= lower):
+            j = int(np.argmax(lower - upper))
+            raise ValueError(f'joint_lower {lower[j]:.4g} is not below joint_upper '
+                             f'{upper[j]:.4g} for {self.arm.joint_names[j]}')
+        return lower, upper
+
     def _goal_problem(self, goal) -> str:
         goal = np.asarray(goal, dtype=float)
         if _unset(goal):
@@ -464,6 +503,12 @@ class PlannerNode(Node):
         outside = self.arm.limit_problem(goal)
         if outside:
             return outside
+        lower, upper = self._joint_range()
+        outside = (goal < lower - 1e-9) | (goal > upper + 1e-9)
+        if outside.any():
+            j = int(np.argmax(outside))
+            return (f'{self.arm.joint_names[j]} at {goal[j]:.4g} rad is outside '
+                    f'[{lower[j]:.4g}, {upper[j]:.4g}] (joint_lower, joint_upper)')
         j = self.arm.joint_outside(goal, tol=-DRIVER_LIMIT_INSET)
         if j is not None:
             return (f'{self.arm.joint_names[j]} at {goal[j]:.6f} rad is outside the joint '
@@ -491,6 +536,12 @@ class PlannerNode(Node):
             try:
                 self._run_settings(changes)
             except (ValueError, TypeError) as err:
+                return SetParametersResult(successful=False, reason=str(err))
+        ranges = {p.name: p.value for p in params if p.name in ('joint_lower', 'joint_upper')}
+        if ranges and hasattr(self, 'arm'):
+            try:
+                self._joint_range(ranges)
+            except ValueError as err:
                 return SetParametersResult(successful=False, reason=str(err))
         for param in params:
             if param.name == 'goal':
@@ -846,7 +897,9 @@ class PlannerNode(Node):
             n_random=self.get_parameter('n_random').value,
             p_goal=self.get_parameter('p_goal').value, step=self.get_parameter('step').value,
             plan_time=plan_time,
-            joint_margin=self.get_parameter('joint_margin').value)
+            joint_margin=self.get_parameter('joint_margin').value,
+            **dict(zip(('joint_lower', 'joint_upper'),
+                       (tuple(bound.tolist()) for bound in self._joint_range()))))
         method = Method.for_node(self.get_parameter('method').value,
                                  self.get_parameter('threshold').value,
                                  self.get_parameter('epsilon').value)
