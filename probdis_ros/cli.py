@@ -1202,7 +1202,7 @@ def build_parser() -> argparse.ArgumentParser:
                     '(default: as the recording planner ran)')
     rp.add_argument('--json', action='store_true',
                     help='print {"paths", "blocks": [{"t", "x", "retreat"}], "failures", '
-                    '"success"}')
+                    '"success", "peak_gap_rad", "peak_point_speed_mps"}')
     rp.add_argument('--plot', metavar='OUT.png', help='joint gaps and the flange path')
     rp.add_argument('--save-map', metavar='FILE', help='write the rebuilt failure map')
     rp.add_argument('--publish', action='store_true',
