@@ -348,6 +348,12 @@ def test_a_joint_range_keeps_the_trees_probes_and_paths_in_the_cells_room(method
     free = Method.parse(method).planner(arm, RRTSettings(joint_margin=ROBOT_JOINT_MARGIN))
     trees = free.grow(start, goal, free.objective.coster(arm, fmap), np.random.default_rng(0))
     assert np.abs(trees[0].nodes[1:trees[0].size, 0]).max() > 0.6
+    # Epsilon's random steps keep to it too
+    epsilon = Method.parse('epsilon:0.01').planner(arm, settings)
+    ends = np.array([epsilon.plan(start, goal, fmap, np.random.default_rng(k)).path[-1]
+                     for k in range(50)])
+    moved = ends[np.any(ends != start, axis=1)]     # (a step through the table stays put)
+    assert len(moved) > 25 and np.all((moved >= low) & (moved <= high))
     with pytest.raises(ValueError, match='no room'):
         ProbRRT(arm, RRTSettings(joint_lower=tuple(upper), joint_upper=tuple(lower)))
     with pytest.raises(ValueError, match='7 values'):

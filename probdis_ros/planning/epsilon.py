@@ -30,7 +30,7 @@ import numpy as np
 from probdis_ros.model.arms import Arm
 from probdis_ros.model.edge_costs import edge_above_table
 from probdis_ros.model.failure_map import FailureMap
-from probdis_ros.planning.prob_rrt import Plan
+from probdis_ros.planning.prob_rrt import Plan, planning_box, RRTSettings
 
 #: X of the Epsilon baseline when none is given (the paper's Epsilon 0.2).
 DEFAULT_EPSILON = 0.2
@@ -42,7 +42,8 @@ class EpsilonPlanner:
     """Straight to the goal with probability epsilon, else a random direction."""
 
     def __init__(self, arm: Arm, epsilon: float = DEFAULT_EPSILON, step: float = 1.0,
-                 joint_margin: float = 0.0) -> None:
+                 joint_margin: float = 0.0, joint_lower: tuple[float, ...] | None = None,
+                 joint_upper: tuple[float, ...] | None = None) -> None:
         if not 0.0 <= epsilon <= 1.0:
             raise ValueError(f'epsilon must be in [0, 1], got {epsilon}')
         if step <= 0:
@@ -50,11 +51,10 @@ class EpsilonPlanner:
         self.arm = arm
         self.epsilon = epsilon
         self.step = step
-        # a random step stays this far inside the joint limits, as ProbRRT's via points do
-        self.low, self.high = arm.lower + joint_margin, arm.upper - joint_margin
-        if np.any(self.low >= self.high):
-            raise ValueError(f'joint_margin {joint_margin} leaves no room between the joint '
-                             'limits')
+        # a random step stays in ProbRRT's box: this far inside the joint limits, within the
+        # cell's room
+        self.low, self.high = planning_box(arm, RRTSettings(
+            joint_margin=joint_margin, joint_lower=joint_lower, joint_upper=joint_upper))
 
     def plan(self, start: np.ndarray, goal: np.ndarray, fmap: FailureMap,
              rng: np.random.Generator) -> Plan:

@@ -180,8 +180,11 @@ class Method:
                 length_weight: float = DEFAULT_LENGTH_WEIGHT):
         """Return the planner of this method for an arm."""
         if self.name == 'epsilon':
+            settings = settings or RRTSettings()
             return EpsilonPlanner(arm, DEFAULT_EPSILON if self.value is None else self.value,
-                                  joint_margin=settings.joint_margin if settings else 0.0)
+                                  joint_margin=settings.joint_margin,
+                                  joint_lower=settings.joint_lower,
+                                  joint_upper=settings.joint_upper)
         if self.name == 'informed':
             return informed_planner(self.idea_letters, arm, settings,
                                     self.objective(length_weight))

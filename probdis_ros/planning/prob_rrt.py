@@ -141,6 +141,32 @@ class RRTSettings:
                 raise ValueError(message)
 
 
+def planning_box(arm: Arm, settings: RRTSettings) -> tuple[np.ndarray, np.ndarray]:
+    """
+    Return the (low, high) a planner's samples and steps keep to: the joint limits less
+    ``joint_margin``, narrowed to ``joint_lower`` / ``joint_upper`` where given.
+
+    ValueError where that leaves no room.
+    """
+    margin = settings.joint_margin
+    if np.any(arm.upper - arm.lower <= 2 * margin):
+        raise ValueError(f'joint_margin {margin} leaves no room between the joint limits')
+    low, high = arm.lower + margin, arm.upper - margin
+    for name, bound in (('joint_lower', settings.joint_lower),
+                        ('joint_upper', settings.joint_upper)):
+        if bound is not None and np.shape(bound) != (arm.n_joints,):
+            raise ValueError(f'{name} must give {arm.n_joints} values, got {bound}')
+    if settings.joint_lower is not None:
+        low = np.maximum(low, np.asarray(settings.joint_lower, dtype=float))
+    if settings.joint_upper is not None:
+        high = np.minimum(high, np.asarray(settings.joint_upper, dtype=float))
+    if np.any(high <= low):
+        joint = int(np.argmax(low - high))
+        raise ValueError(f'A{joint + 1}: joint_lower and joint_upper leave no room within the '
+                         f'joint limits (less joint_margin)')
+    return low, high
+
+
 @dataclass
 class Plan:
     """A planned path: via points ``(M, n_joints)`` from start to goal and its cost."""
@@ -167,26 +193,12 @@ class ProbRRT:
         # loop is its reference, bit for bit
         self.compiled = compiled and arm.kernel_params()[0] != PLANAR
         s = self.settings
-        margin = s.joint_margin
-        if np.any(self.arm.upper - self.arm.lower <= 2 * margin):
-            raise ValueError(f'joint_margin {margin} leaves no room between the joint limits')
         # the box that samples, steps, probes and smoothing keep to (a start or goal may lie
         # between it and the limits: the trees grow from it into the box)
-        self.low = self.arm.lower + margin
-        self.high = self.arm.upper - margin
-        for name, bound in (('joint_lower', s.joint_lower), ('joint_upper', s.joint_upper)):
-            if bound is not None and np.shape(bound) != (self.arm.n_joints,):
-                raise ValueError(f'{name} must give {self.arm.n_joints} values, got {bound}')
-        if s.joint_lower is not None:
-            self.low = np.maximum(self.low, np.asarray(s.joint_lower, dtype=float))
-        if s.joint_upper is not None:
-            self.high = np.minimum(self.high, np.asarray(s.joint_upper, dtype=float))
-        if np.any(self.high <= self.low):
-            joint = int(np.argmax(self.low - self.high))
-            raise ValueError(f'A{joint + 1}: joint_lower and joint_upper leave no room within '
-                             f'the joint limits (less joint_margin)')
+        self.low, self.high = planning_box(arm, s)
         # steps are clipped into the box where it is narrower than the joint limits
-        self.clips = margin > 0 or s.joint_lower is not None or s.joint_upper is not None
+        self.clips = s.joint_margin > 0 or s.joint_lower is not None or \
+            s.joint_upper is not None
         self._warm_up()
 
     def _warm_up(self) -> None:
