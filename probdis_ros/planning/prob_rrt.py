@@ -143,10 +143,10 @@ class RRTSettings:
 
 def planning_box(arm: Arm, settings: RRTSettings) -> tuple[np.ndarray, np.ndarray]:
     """
-    Return the (low, high) a planner's samples and steps keep to: the joint limits less
-    ``joint_margin``, narrowed to ``joint_lower`` / ``joint_upper`` where given.
+    Return the (low, high) that a planner's samples and steps keep to.
 
-    ValueError where that leaves no room.
+    The joint limits less ``joint_margin``, narrowed to ``joint_lower`` / ``joint_upper``
+    where given; ValueError where that leaves no room.
     """
     margin = settings.joint_margin
     if np.any(arm.upper - arm.lower <= 2 * margin):
