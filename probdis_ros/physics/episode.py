@@ -39,7 +39,7 @@ from probdis_ros.physics.simulated_robot import build_robot, DRIVER_STOPPED, Rob
 from probdis_ros.planning import Disentangler, Method, RRTSettings, State
 from probdis_ros.planning.disentangle import DEFAULT_MIN_RETREAT
 from probdis_ros.planning.prob_rrt import ROBOT_JOINT_MARGIN
-from probdis_ros.run import Learned, PlanFrom, Run, RunSettings, Send
+from probdis_ros.run import Learned, Phase, PlanFrom, Run, RunSettings, Send
 
 #: [s] of simulated time the arm rests, held, once the run stopped on the silent driver and
 #: before the operator restarts it (``restarts``): a real restart takes longer, and the arm
@@ -208,7 +208,8 @@ def run_physics_episode(scene: str, method: str | Method = 'probabilistic', seed
             messages.append(run.message)
             break
         messages.append(f'{run.message} ({DRIVER_STOPPED} {robot.stopped})')
-        if len(loops) > restarts or paths_used >= max_paths:
+        # (a run that reached the goal as the driver stopped is done: nothing to restart)
+        if run.phase is Phase.SUCCEEDED or len(loops) > restarts or paths_used >= max_paths:
             break
         rest_until = robot.time + RESTART_AFTER
         while robot.time < min(rest_until, time_limit):
