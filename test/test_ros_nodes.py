@@ -230,7 +230,10 @@ def test_a_joint_range_narrows_the_planner_and_refuses_goals_and_ranges_outside(
     for name, value, said in (('goal', [-0.5, *GOAL[1:].tolist()], 'outside [-0.3, 0.5]'),
                               ('joint_upper', [3.5] + [nan] * 6, 'outside its limits'),
                               ('joint_lower', [0.6] + [nan] * 6, 'is not below joint_upper'),
-                              ('joint_lower', [0.0] * 6, 'needs 7 values')):
+                              ('joint_lower', [0.0] * 6, 'needs 7 values'),
+                              # A2 within its limits, but not within joint_margin of them
+                              ('joint_lower', [-0.3, float(node.arm.upper[1]) - 0.01] +
+                               [nan] * 5, 'A2: joint_lower and joint_upper leave no room')):
         result = node.set_parameters([Parameter(name, value=value)])[0]
         assert not result.successful and said in result.reason, result.reason
     # narrowed past the goal: ~/start says so

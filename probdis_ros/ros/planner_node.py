@@ -61,7 +61,7 @@ from probdis_ros.motion.detector import DetectorSettings, MotionWatch
 from probdis_ros.motion.state_check import BadJointStateError, StateCheck, values_by_name
 from probdis_ros.planning import Disentangler, Method, RRTSettings, State
 from probdis_ros.planning.disentangle import DEFAULT_MIN_RETREAT
-from probdis_ros.planning.prob_rrt import ROBOT_JOINT_MARGIN
+from probdis_ros.planning.prob_rrt import planning_box, ROBOT_JOINT_MARGIN
 from probdis_ros.planning.warm_up import warm_up
 from probdis_ros.ros import (
     checked_joint_names,
@@ -472,7 +472,8 @@ class PlannerNode(Node):
         Return the planned paths' room per joint, (lower, upper), from the parameters.
 
         NaN stands for the joint's limit.  ValueError for a range that is not 7 values,
-        outside the joint limits, or empty.
+        outside the joint limits, or empty, also once ``joint_margin`` is kept from the
+        limits (the planner's box, :func:`planning_box`, checked here, where it is set).
         """
         bounds = []
         for name, limit in (('joint_lower', self.arm.lower), ('joint_upper', self.arm.upper)):
@@ -492,6 +493,9 @@ class PlannerNode(Node):
             j = int(np.argmax(lower - upper))
             raise ValueError(f'joint_lower {lower[j]:.4g} is not below joint_upper '
                              f'{upper[j]:.4g} for {self.arm.joint_names[j]}')
+        margin = (changes or {}).get('joint_margin', self.get_parameter('joint_margin').value)
+        planning_box(self.arm, RRTSettings(joint_margin=margin, joint_lower=tuple(lower),
+                                           joint_upper=tuple(upper)))
         return lower, upper
 
     def _goal_problem(self, goal) -> str:
@@ -537,7 +541,8 @@ class PlannerNode(Node):
                 self._run_settings(changes)
             except (ValueError, TypeError) as err:
                 return SetParametersResult(successful=False, reason=str(err))
-        ranges = {p.name: p.value for p in params if p.name in ('joint_lower', 'joint_upper')}
+        ranges = {p.name: p.value for p in params
+                  if p.name in ('joint_lower', 'joint_upper', 'joint_margin')}
         if ranges and hasattr(self, 'arm'):
             try:
                 self._joint_range(ranges)
