@@ -793,7 +793,8 @@ def cmd_service(args: argparse.Namespace) -> int:
     """Call a planner service; exit 1 on refusal, 3 on timeout."""
     from probdis_ros.ros.client import PlannerClient
 
-    service = {'start': 'start', 'stop': 'stop', 'reset-map': 'reset_map'}[args.command]
+    service = {'start': 'start', 'stop': 'stop', 'reset-map': 'reset_map',
+               'confirm': 'confirm_path', 'decline': 'decline_path'}[args.command]
     _positive(args.timeout, '--timeout')      # NaN would wait forever
     with PlannerClient(args.planner) as client:
         try:
@@ -1143,6 +1144,10 @@ def build_parser() -> argparse.ArgumentParser:
     for name, text in (('start', 'start a disentangling (~/start)'),
                        ('stop', 'stop: the arm decelerates to rest (~/stop)'),
                        ('reset-map', 'clear the failure map (~/reset_map)'),
+                       ('confirm', 'send the planned path that awaits confirmation '
+                        '(confirm_paths; ~/confirm_path)'),
+                       ('decline', 'drop the planned path that awaits confirmation and plan '
+                        'another (~/decline_path)'),
                        ('status', "print the planner's status")):
         call = sub.add_parser(name, help=text)
         call.add_argument('--planner', default='/probdis_planner', help='planner node name')

@@ -58,6 +58,7 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from enum import Enum
+import itertools
 import math
 import threading
 
@@ -115,6 +116,7 @@ class Phase(str, Enum):
     PLANNING = 'planning'
     EXECUTING = 'executing'
     RETREATING = 'retreating'
+    AWAITING = 'awaiting_confirmation'     # a planned path waits for the operator
     SUCCEEDED = 'succeeded'
     GAVE_UP = 'gave_up'
     STOPPED = 'stopped'
@@ -122,7 +124,7 @@ class Phase(str, Enum):
     @property
     def active(self) -> bool:
         """Tell whether the arm is being driven by the run."""
-        return self in (Phase.PLANNING, Phase.EXECUTING, Phase.RETREATING)
+        return self in (Phase.PLANNING, Phase.EXECUTING, Phase.RETREATING, Phase.AWAITING)
 
 
 #: The fastest velocity scaling a run takes: the arm in joint impedance overshoots its
@@ -158,6 +160,9 @@ class RunSettings:
     # default) or 'desired' (true: from its last command; every command is then planned
     # from that desired state, and one that starts pressed in waits for the gap to count)
     jtc_start: str = DEFAULT_JTC_START
+    # each planned path waits at rest for confirm() (or decline()) before it is sent, so that
+    # an operator in T1 sees where the arm will go first; retreats and stops are not held
+    confirm_paths: bool = False
 
     def __post_init__(self) -> None:
         """Refuse values a run cannot use, naming them."""
@@ -247,6 +252,13 @@ class PlanFrom:
 
 
 @dataclass(frozen=True)
+class Propose:
+    """A planned path waits for the operator: show it (confirm_paths)."""
+
+    path: np.ndarray
+
+
+@dataclass(frozen=True)
 class Learned:
     """A block was detected and one failure added to the map."""
 
@@ -298,6 +310,16 @@ def rest_command(arm: Arm, limits: MotionLimits, q: np.ndarray,
     return stop(q, possible(arm, v), np.zeros_like(q), limits).command
 
 
+def tip_travel(arm: Arm, path: np.ndarray, step: float = 0.02) -> float:
+    """Return how far the tip moves along a path's joint-space edges [m], every step rad."""
+    points = [path[:1]]
+    for a, b in itertools.pairwise(path):
+        n = max(1, math.ceil(np.abs(b - a).max() / step))
+        points.append(a + np.outer(np.arange(1, n + 1) / n, b - a))
+    tips = arm.positions(np.vstack(points))
+    return float(np.linalg.norm(np.diff(tips, axis=0), axis=1).sum())
+
+
 def possible(arm: Arm, v: np.ndarray) -> np.ndarray:
     """
     Return v within what the arm can do (JUMP_SPEED x its velocity limits; finite).
@@ -336,6 +358,8 @@ class Run:
         self.motion: Motion | None = None                # the path or retreat being run
         self.plan_pending = False
         self.pending_path: np.ndarray | None = None
+        self.proposed: np.ndarray | None = None          # the path awaiting confirmation
+        self._confirmed = False                          # the pending path was confirmed
         self.block_time: float | None = None
         self.retreat_sent = 0.0
         self.retreat_done_at: float | None = None
@@ -504,6 +528,36 @@ class Run:
             return
         self.finish(State.STOPPED, reason)
 
+    def confirm(self, now: float) -> str:
+        """
+        Send the path awaiting confirmation; return why not ('' when done).
+
+        An arm moved from the path's start since is planned for again (and that path waits).
+        """
+        self._now = now
+        if self.phase is not Phase.AWAITING:
+            return f'no path awaits confirmation (the run is {self.phase.value})'
+        self.pending_path, self.proposed = self.proposed, None
+        self.phase = Phase.PLANNING
+        self.message = f'path {self.loop.paths_tried} confirmed'
+        self._confirmed = True
+        try:
+            self._send_pending()
+        finally:
+            self._confirmed = False
+        return ''
+
+    def decline(self, now: float) -> str:
+        """Drop the path awaiting confirmation and plan another; return why not ('' when done)."""
+        self._now = now
+        if self.phase is not Phase.AWAITING:
+            return f'no path awaits confirmation (the run is {self.phase.value})'
+        start, self.proposed = self.proposed[0], None
+        self.loop.decline()
+        self.message = 'path declined: planning another'
+        self._plan_from(start)
+        return ''
+
     def bad_joint_state(self, reason: str) -> None:
         """Stop an active run: a joint state was refused (it is not used for anything)."""
         if self.phase.active:
@@ -638,16 +692,36 @@ class Run:
         if not self.arm.within_limits(path).all():
             self.finish(State.STOPPED, 'planned path leaves the joint limits; not sent')
             return
+        if self.settings.confirm_paths and not self._confirmed:
+            self._note_latency()
+            self._propose(path)
+            return
         motion = self._motion(path, planned_at)
-        now = self._time()
-        if self.block_time is not None:
-            waited = (self.retreat_sent - self.block_time) + max(
-                0.0, now - (self.retreat_done_at or now))
-            self.latencies.append(waited)
-            self.block_time = None
+        self._note_latency()
         self._send(motion, path, planned_at if self._desired_start else None)
         self.phase = Phase.EXECUTING
         self.retreat_done_at = None
+        self._emit(StatusChanged())
+
+    def _note_latency(self) -> None:
+        """After a block: note how long until the next path was ready (sent or proposed)."""
+        if self.block_time is None:
+            return
+        now = self._time()
+        waited = (self.retreat_sent - self.block_time) + max(
+            0.0, now - (self.retreat_done_at or now))
+        self.latencies.append(waited)
+        self.block_time = None
+
+    def _propose(self, path: np.ndarray) -> None:
+        """Hold a planned path, the arm at rest, until confirm() or decline()."""
+        self.proposed = path
+        self.phase = Phase.AWAITING
+        self.retreat_done_at = None
+        self.message = (f'path {self.loop.paths_tried} planned: {len(path) - 1} edges, the '
+                        f'flange travels {tip_travel(self.arm, path):.2f} m; ~/confirm_path '
+                        f'sends it, ~/decline_path plans another, ~/stop ends the run')
+        self._emit(Propose(path.copy()))
         self._emit(StatusChanged())
 
     def _send(self, motion: Motion, path: np.ndarray | None = None,
@@ -768,6 +842,7 @@ class Run:
         self.outcome = state.value
         self.plan_pending = False
         self.pending_path = None
+        self.proposed = None
         if self.detector is not None:   # held now only if its command began pressed in, not back
             self.pressed = self.detector.pressed
         self.detector = None
@@ -855,4 +930,6 @@ class Run:
             'replan_latencies_s': self.latencies,
             'outcome': self.outcome,
             'message': self.message,
+            # the via points [rad] of the path awaiting confirmation (confirm_paths)
+            'proposed_path': None if self.proposed is None else self.proposed.tolist(),
         }

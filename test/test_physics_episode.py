@@ -69,6 +69,30 @@ def test_a_driver_stopped_by_the_speed_monitoring_is_restarted_and_the_run_resum
         run_physics_episode('demo_hook', restarts=-1)
 
 
+def test_paths_confirmed_at_once_run_as_unconfirmed_ones_and_a_wait_holds_the_arm():
+    from probdis_ros.run import RunSettings
+
+    plain = run_physics_episode('demo_hook', 'probabilistic', seed=1, max_paths=5)
+    confirm = RunSettings(confirm_paths=True)
+    at_once = run_physics_episode('demo_hook', 'probabilistic', seed=1, max_paths=5,
+                                  run_settings=confirm)
+    assert at_once.success and len(at_once.proposed_at) == at_once.paths == plain.paths
+    np.testing.assert_array_equal(at_once.configs, plain.configs)
+    # an operator who looks for a second: every path waits, the arm at rest, nothing sent
+    waited = run_physics_episode('demo_hook', 'probabilistic', seed=1, max_paths=5,
+                                 run_settings=confirm, confirm_after=1.0)
+    assert waited.success and waited.paths == plain.paths
+    assert len(waited.proposed_at) == waited.paths >= 2
+    sent = np.array([command[0] for command in waited.commands])
+    for proposed in waited.proposed_at:
+        assert not np.any((sent > proposed) & (sent < proposed + 1.0 - 1e-9))
+        held = waited.configs[(waited.times >= proposed) & (waited.times < proposed + 1.0)]
+        assert np.abs(held - held[0]).sum(axis=1).max() < 0.03    # settling only
+    assert waited.sim_time_s >= plain.sim_time_s + 1.5
+    with pytest.raises(ValueError, match='confirm_after'):
+        run_physics_episode('demo_hook', confirm_after=-1.0)
+
+
 def test_probdis_sim_engine_physics_prints_json_and_draws_the_scene(tmp_path):
     picture = tmp_path / 'run.png'
     # the paper's method meets the hook before it gets out (the default, informed, may turn

@@ -60,6 +60,8 @@ def test_service_commands_against_a_running_planner(env, tmp_path):
         assert status['failures'] == 0 and status['paths'] == 0
         refused = run(env, 'start')
         assert refused.returncode == 1 and 'no fresh joint state' in refused.stdout
+        nothing = run(env, 'confirm')
+        assert nothing.returncode == 1 and 'no path awaits confirmation' in nothing.stdout
         cleared = run(env, 'reset-map')
         assert cleared.returncode == 0 and 'cleared 0 failures' in cleared.stdout
         # parameters without the ros2 CLI: the goal can be read and changed between runs

@@ -574,6 +574,46 @@ def test_a_clock_step_on_the_arm_stops_the_run_with_a_stop_jtc_takes(ros, tmp_pa
     np.testing.assert_allclose(arm.q, end, atol=0.01)
 
 
+def test_with_confirm_paths_each_path_waits_for_the_operator(ros, tmp_path):
+    planner(ros, tmp_path, confirm_paths=True)
+    arm = mock(ros)
+
+    def awaiting():
+        return ros.status.get('state') == 'awaiting_confirmation'
+
+    assert not ros.call('confirm_path').success       # no run yet
+    wait_for(lambda: ros.call('start').success, 20, 'start')
+    wait_for(awaiting, 20, 'the first path proposed')
+    first = ros.status
+    assert first['paths'] == 1 and 'confirm_path' in first['message']
+    proposed = np.array(first['proposed_path'])
+    np.testing.assert_allclose(proposed[0], START, atol=0.05)
+    time.sleep(0.5)
+    assert not ros.trajectories, 'nothing is sent while the path waits'
+    np.testing.assert_allclose(arm.q, START, atol=1e-3)
+    # declined: another plan from the same start, not counted as a path tried
+    declined = ros.call('decline_path')
+    assert declined.success and 'declined' in declined.message
+    wait_for(lambda: awaiting() and ros.status['proposed_path'] is not None
+             and ros.status['message'] != 'path declined: planning another', 20,
+             'a second proposal')
+    assert ros.status['paths'] == 1 and not ros.trajectories
+    confirms = 0
+    while not finished(ros):
+        if awaiting():
+            count = len(ros.trajectories)
+            answer = ros.call('confirm_path')
+            assert answer.success, answer.message
+            confirms += 1
+            wait_for(lambda: len(ros.trajectories) > count, 5, 'the confirmed path sent')
+            assert not ros.call('confirm_path').success     # nothing waits any more
+        time.sleep(0.05)
+        assert confirms <= 20
+    status = ros.status
+    assert status['state'] == 'succeeded', status
+    assert confirms == status['paths'] >= 2 and status['proposed_path'] is None
+
+
 def test_stop_during_planning_sends_no_path(ros, tmp_path):
     planner(ros, tmp_path)
     steady_states(ros)

@@ -27,6 +27,7 @@ machine's speed.  ``probdis sim --engine physics`` and the robot-style sweeps us
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+import math
 import time
 
 import numpy as np
@@ -39,7 +40,7 @@ from probdis_ros.physics.simulated_robot import build_robot, DRIVER_STOPPED, Rob
 from probdis_ros.planning import Disentangler, Method, RRTSettings, State
 from probdis_ros.planning.disentangle import DEFAULT_MIN_RETREAT
 from probdis_ros.planning.prob_rrt import ROBOT_JOINT_MARGIN
-from probdis_ros.run import Learned, Phase, PlanFrom, Run, RunSettings, Send
+from probdis_ros.run import Learned, Phase, PlanFrom, Propose, Run, RunSettings, Send
 
 #: [s] of simulated time the arm rests, held, once the run stopped on the silent driver and
 #: before the operator restarts it (``restarts``): a real restart takes longer, and the arm
@@ -77,6 +78,8 @@ class PhysicsEpisode:
     point_speed_peak: float = 0.0
     # when the driver was restarted after it stopped the arm (``restarts``) [s, simulated]
     restarted_at: list[float] = field(default_factory=list)
+    # when each planned path was proposed to the operator (``confirm_paths``) [s, simulated]
+    proposed_at: list[float] = field(default_factory=list)
 
     @property
     def restarts(self) -> int:
@@ -120,7 +123,8 @@ def run_physics_episode(scene: str, method: str | Method = 'probabilistic', seed
                         physics_settings: PhysicsSettings | None = None,
                         time_limit: float = 600.0, goal_tolerance: float = 0.04,
                         min_retreat: float = DEFAULT_MIN_RETREAT,
-                        table: Table | None = ROBOT_TABLE, restarts: int = 0) -> PhysicsEpisode:
+                        table: Table | None = ROBOT_TABLE, restarts: int = 0,
+                        confirm_after: float = 0.0) -> PhysicsEpisode:
     """
     Disentangle a physics scene from its start to its goal; reproducible from seed.
 
@@ -135,9 +139,14 @@ def run_physics_episode(scene: str, method: str | Method = 'probabilistic', seed
     was learned (the node keeps it on disk), the new run plans from where the arm is, and
     all runs together plan at most ``max_paths`` paths.  A restart the robot application
     refuses (the arm presses on something: ``SimulatedRobot.restart``) ends the episode.
+
+    ``confirm_after``: with ``run_settings.confirm_paths``, the operator confirms each
+    planned path this long [s, simulated] after it is proposed (the arm waits at rest).
     """
     if restarts < 0:
         raise ValueError(f'restarts must be >= 0, got {restarts}')
+    if not 0.0 <= confirm_after < math.inf:
+        raise ValueError(f'confirm_after must be finite and >= 0, got {confirm_after}')
     wall = time.perf_counter()
     method = Method.resolve(method) if isinstance(method, str) else method
     if robot_settings is None and run_settings is not None:
@@ -162,6 +171,7 @@ def run_physics_episode(scene: str, method: str | Method = 'probabilistic', seed
         return loop, run
 
     failures, commands, loops, messages, restarted_at = [], [], [], [], []
+    proposed_at: list[float] = []         # when each path was proposed (confirm_paths)
     times, configs, velocities, gaps, forces, table_forces = [], [], [], [], [], []
     torque_peak = np.zeros(arm.n_joints)
 
@@ -176,6 +186,15 @@ def run_physics_episode(scene: str, method: str | Method = 'probabilistic', seed
                 run.on_plan(loop.next_path(action.config))
             elif isinstance(action, Learned):
                 failures.append(action.event)
+            elif isinstance(action, Propose):
+                proposed_at.append(robot.time)
+                if confirm_after == 0.0:
+                    run.confirm(robot.time)
+
+    def confirm_due() -> None:
+        if run.phase is Phase.AWAITING and robot.time >= proposed_at[-1] + confirm_after:
+            run.confirm(robot.time)
+            act()
 
     def record(run: Run | None) -> None:
         times.append(robot.time)
@@ -200,6 +219,7 @@ def run_physics_episode(scene: str, method: str | Method = 'probabilistic', seed
                 run.on_joint_state(state.time, state.position, state.velocity)
             run.tick(robot.time)
             act()
+            confirm_due()
             record(run)
         if run.active:
             run.finish(State.STOPPED, f'time limit of {time_limit:.0f} s simulated reached')
@@ -234,6 +254,7 @@ def run_physics_episode(scene: str, method: str | Method = 'probabilistic', seed
         plan_times_s=[t for each in loops for t in each.plan_times],
         sim_time_s=robot.time, wall_time_s=time.perf_counter() - wall, scene=scene_doc,
         loop=loop, message='; then '.join(messages), commands=commands, restarted_at=restarted_at,
+        proposed_at=proposed_at,
         command_speed_peak=robot.command_speed_peak, sent_speed_peak=robot.sent_speed_peak,
         point_speed_peak=float(point_speeds(arm, np.array(configs), np.array(velocities))
                                .max(initial=0.0)) if configs else 0.0)

@@ -272,6 +272,16 @@ class Disentangler:
             self._route.pop()
         self.state = State.READY
 
+    def decline(self) -> None:
+        """
+        Take back the path just planned, which the operator declined: plan again from its start.
+
+        The arm is at that start; the path does not count as a path tried.
+        """
+        self._expect(State.EXECUTING)
+        self.attempts.pop()
+        self.state = State.READY
+
     def learn(self, config: np.ndarray, joint_direction: np.ndarray) -> None:
         """Add the failure of a motion blocked outside a planned path (a blocked retreat)."""
         self.fmap.add(*self.failure_at(self.arm.as_batch(config)[0], joint_direction))

@@ -42,7 +42,7 @@ from probdis_ros.sim.worlds import load_world
 #: The scene of ``probdis demo`` and ``make demo``.
 DEFAULT_SCENE = 'demo_hook'
 FINISHED = ('succeeded', 'gave_up', 'stopped')
-RUNNING = ('planning', 'executing', 'retreating')
+RUNNING = ('planning', 'executing', 'retreating', 'awaiting_confirmation')
 
 
 def ros_environment() -> dict:

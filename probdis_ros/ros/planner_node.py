@@ -78,8 +78,10 @@ from probdis_ros.ros.recorder import BagRecorder, message_types
 from probdis_ros.run import (
     Learned,
     MAX_VELOCITY_SCALING,
+    Phase,
     PlanCancelledError,
     PlanFrom,
+    Propose,
     rest_command,
     Run,
     RunSettings,
@@ -109,7 +111,7 @@ NODE_NAME = 'probdis_planner'
 #: The defaults of the run and of its detector: the parameters below take theirs from here.
 RUN, DETECT = RunSettings(), RunSettings().detection
 RUN_FIELDS = ('velocity_scaling', 'acceleration_scaling', 'acceleration_limit', 'jerk_limit',
-              'state_timeout', 'replan_tolerance', 'cartesian_speed_limit')
+              'state_timeout', 'replan_tolerance', 'cartesian_speed_limit', 'confirm_paths')
 DETECTOR_FIELDS = ('d_dist', 'stall_time', 'stall_motion', 'settle_time', 'motion_delay',
                    'gap_ceiling', 'joint_gap_ceiling', 'onset_gap', 'echo_time',
                    'driver_tau', 'torque_ceiling', 'load_mass', 'load_com')
@@ -184,6 +186,11 @@ PARAMETERS = {
         "object_radius, the flange) moves on a path or retreat; in KUKA's T1 (250 mm/s) "
         'set 0.15 with gap_ceiling 0.15 and joint_gap_ceiling 0.08 (config/planner_t1.yaml); '
         '0: the joint limits only', 0.0, 10.0)),
+    'confirm_paths': (RUN.confirm_paths, ParameterDescriptor(
+        description='each planned path waits, the arm at rest, for ~/confirm_path (or '
+                    '~/decline_path: plan another) before it is sent, and the status and '
+                    "markers show it first (a first session in T1); retreats and stops don't "
+                    'wait')),
     'd_dist': (DETECT.d_dist, _float('L1 gap [rad] above which a stalled motion is blocked',
                                      0.001, 1.0)),
     'stall_time': (DETECT.stall_time, _float('time without progress that counts as stalled '
@@ -399,6 +406,8 @@ class PlannerNode(Node):
         self.create_service(Trigger, '~/start', self._on_start)
         self.create_service(Trigger, '~/stop', self._on_stop)
         self.create_service(Trigger, '~/reset_map', self._on_reset_map)
+        self.create_service(Trigger, '~/confirm_path', self._on_confirm_path)
+        self.create_service(Trigger, '~/decline_path', self._on_decline_path)
         # on the wall clock: with use_sim_time the run's timeouts read the node's (simulated)
         # clock in the tick, and a /clock that stops must still be noticed
         self.create_timer(TICK, self._tick, clock=Clock(clock_type=ClockType.STEADY_TIME))
@@ -935,6 +944,25 @@ class PlannerNode(Node):
             'no run active and no fresh joint state: nothing commanded')
         return response
 
+    def _on_confirm_path(self, request, response):
+        """Send the path that awaits confirmation (confirm_paths)."""
+        return self._answer_proposal(response, 'confirm')
+
+    def _on_decline_path(self, request, response):
+        """Drop the path that awaits confirmation and plan another (confirm_paths)."""
+        return self._answer_proposal(response, 'decline')
+
+    def _answer_proposal(self, response, answer: str):
+        run = self.run
+        if run is None or run.phase is not Phase.AWAITING:
+            response.success = False
+            response.message = 'no path awaits confirmation' + (
+                f' (the run is {run.phase.value})' if run is not None else '')
+            return response
+        self._guarded(getattr(run, answer), self._now())
+        response.success, response.message = run.active, run.message
+        return response
+
     def _on_reset_map(self, request, response):
         if self.active:
             response.success, response.message = False, 'a run is active; call ~/stop first'
@@ -1009,6 +1037,9 @@ class PlannerNode(Node):
                     self._publish_markers(action.path)
             elif isinstance(action, PlanFrom):
                 self.plan_future = _in_thread(run.loop.next_path, action.config)
+            elif isinstance(action, Propose):
+                self._publish_markers(action.path)
+                self.get_logger().info(run.message)
             elif isinstance(action, Learned):
                 self.failure_pub.publish(String(data=json.dumps(action.event)))
                 self._save_map()
@@ -1198,7 +1229,7 @@ class PlannerNode(Node):
         diag = DiagnosticStatus(level=level, name=f'{NODE_NAME}: disentangling',
                                 hardware_id='lbr_iiwa14', message=message)
         diag.values = [KeyValue(key=k, value=str(v)) for k, v in status.items()
-                       if k not in ('replan_latencies_s', 'detection')]
+                       if k not in ('replan_latencies_s', 'detection', 'proposed_path')]
         msg = DiagnosticArray(status=[diag])
         msg.header.stamp = self.get_clock().now().to_msg()
         self.diag_pub.publish(msg)
