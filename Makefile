@@ -20,7 +20,7 @@ PYTHON ?= $(firstword $(foreach p,python3.11 python3.12 python3.10 python3,\
   $(shell $(p) -c 'import sys; sys.exit(not (3, 10) <= sys.version_info[:2] <= (3, 12))' \
   >/dev/null 2>&1 && echo $(p))))
 
-.PHONY: venv demo test lint bench clean
+.PHONY: venv demo test test-numpy1 lint bench clean
 
 venv: $(STAMP)
 
@@ -57,6 +57,28 @@ test: lint $(BENCH_STAMP)
 bench: venv
 	$(VENV)/bin/probdis bench fk
 	$(VENV)/bin/probdis bench plan
+
+# What a robot PC with ROS 2 Jazzy on Ubuntu 24.04 runs: numpy 1.26.4 and matplotlib 3.6.3
+# (apt) under the PyPI packages of .ci/requirements/ros-machine.txt (the same pins as here).
+# The whole suite once more (about 13 min on two cores): not part of `make test`.
+NUMPY1_VENV ?= .venv-numpy1
+NUMPY1_STAMP := $(NUMPY1_VENV)/.probdis-installed
+
+$(NUMPY1_STAMP): $(REQUIREMENTS) .ci/requirements/numpy1-pinocchio.txt setup.py package.xml
+	$(PYTHON) -m venv $(NUMPY1_VENV)
+	sed -e '/^pin==/d' -e 's/^numpy==.*/numpy==1.26.4/' -e 's/^matplotlib==.*/matplotlib==3.6.3/' \
+	  .ci/requirements/pypi.txt > $(NUMPY1_VENV)/requirements.txt
+	$(NUMPY1_VENV)/bin/python -m pip install --quiet --disable-pip-version-check \
+	  -r $(NUMPY1_VENV)/requirements.txt -r .ci/requirements/test.txt
+	$(NUMPY1_VENV)/bin/python -m pip install --quiet --disable-pip-version-check --no-deps \
+	  -r .ci/requirements/numpy1-pinocchio.txt
+	$(NUMPY1_VENV)/bin/python -m pip install --quiet --disable-pip-version-check --no-deps \
+	  --no-build-isolation --use-pep517 -e .
+	@touch $(NUMPY1_STAMP)
+
+test-numpy1: $(NUMPY1_STAMP)
+	NUMBA_CACHE_DIR=$(CURDIR)/build/numba-numpy1 $(NUMPY1_VENV)/bin/python -m pytest test \
+	  --ignore=test/test_bench_quality.py
 
 clean:
 	rm -rf build install log $(OUT) .pytest_cache .ruff_cache
