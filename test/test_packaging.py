@@ -52,6 +52,25 @@ def test_package_xml_declares_every_dependency():
     assert {'ament_copyright', 'ament_flake8', 'ament_pep257', 'python3-pytest'} <= tests
 
 
+def _pins(name: str) -> dict[str, str]:
+    """Return a requirements file's pins, package (extras dropped) to version."""
+    pins = {}
+    for line in (ROOT / '.ci' / 'requirements' / name).read_text().splitlines():
+        if line.strip() and not line.startswith('#'):
+            package, version = line.split('==')
+            pins[package.split('[')[0].lower()] = version.strip()
+    return pins
+
+
+def test_a_robot_pc_installs_the_versions_the_tests_run_with():
+    # the robot PC takes numpy, matplotlib and pinocchio from apt, the rest from PyPI
+    # (ros-machine.txt): pinned as here, so that it runs the code the tests ran
+    robot, tested = _pins('ros-machine.txt'), _pins('pypi.txt')
+    assert set(robot) == {'numba', 'llvmlite', 'ruckig', 'rosbags', 'mujoco', 'dask'}
+    assert {package: tested[package] for package in robot} == robot
+    assert _pins('numpy1-pinocchio.txt')['pin'] == tested['pin']
+
+
 def test_colcon_build_installs_the_executable_and_the_share_files(tmp_path):
     source = copy_source_tree(tmp_path / 'src' / 'probdis_ros')
     build = subprocess.run(
