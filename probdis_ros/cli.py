@@ -944,7 +944,10 @@ def cmd_replay(args: argparse.Namespace) -> int:
     print(f'{args.bag}: {result.runs} run(s), {result.paths} path(s), {len(result.blocks)} '
           f'block(s), {"disentangled" if result.success else "not disentangled"}; peak gap '
           f'{result.peak_gap:.3f} rad (motion_delay {result.settings.motion_delay:g} s); '
-          f'fastest point of the arm {result.peak_point_speed:.3f} m/s')
+          f'fastest point of the arm {result.peak_point_speed:.3f} m/s' + (
+              '' if result.torque_peak is None else
+              f'; peak external torque {result.torque_peak.max():.1f} Nm at '
+              f'A{int(result.torque_peak.argmax()) + 1}'))
     for block in result.blocks:
         x = ', '.join(f'{v:.3f}' for v in block.x)
         during = 'a retreat' if block.retreat else 'a path'
@@ -1207,7 +1210,9 @@ def build_parser() -> argparse.ArgumentParser:
                     '(default: as the recording planner ran)')
     rp.add_argument('--json', action='store_true',
                     help='print {"paths", "blocks": [{"t", "x", "retreat"}], "failures", '
-                    '"success", "peak_gap_rad", "peak_point_speed_mps"}')
+                    '"success", "peak_gap_rad", "peak_point_speed_mps", '
+                    '"peak_external_torque_nm" (per joint, efforts minus gravity; null without '
+                    'efforts)}')
     rp.add_argument('--plot', metavar='OUT.png', help='joint gaps and the flange path')
     rp.add_argument('--save-map', metavar='FILE', help='write the rebuilt failure map')
     rp.add_argument('--publish', action='store_true',

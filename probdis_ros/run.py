@@ -65,7 +65,13 @@ import threading
 import numpy as np
 from probdis_ros.model.arms import Arm
 from probdis_ros.motion.cartesian_speed import CartesianSpeedLimit
-from probdis_ros.motion.detector import BlockDetector, DetectorSettings, slope_of, Verdict
+from probdis_ros.motion.detector import (
+    BlockDetector,
+    DetectorSettings,
+    external_torque,
+    slope_of,
+    Verdict,
+)
 from probdis_ros.motion.jtc import (
     CONTROLLER_RATE,
     DEFAULT_JTC_START,
@@ -360,6 +366,7 @@ class Run:
         self.pending_path: np.ndarray | None = None
         self.proposed: np.ndarray | None = None          # the path awaiting confirmation
         self._confirmed = False                          # the pending path was confirmed
+        self.proposals = 0                               # paths proposed, declined ones too
         self.block_time: float | None = None
         self.retreat_sent = 0.0
         self.retreat_done_at: float | None = None
@@ -368,6 +375,9 @@ class Run:
         self.pressed = False                             # the last motion ended blocked
         self._recent: deque[tuple[float, np.ndarray]] = deque()     # (time, measured)
         self.latencies: list[float] = []
+        # per joint, the largest |effort - g(q)| while the run drove the arm [Nm] (None: the
+        # joint states carry no efforts)
+        self.torque_peak: np.ndarray | None = None
         self.outcome = ''
         self.message = 'ready'
         self._now = -np.inf
@@ -412,7 +422,7 @@ class Run:
         Take a measured state at time now (a configuration that cannot be the arm's stops).
 
         ``effort``, the measured joint torques where the driver sends them, feeds the
-        detector's external-torque ceiling.
+        detector's external-torque ceiling and the run's peak external torque.
         """
         self._now = now
         problem = usable(self.arm, config)
@@ -420,6 +430,8 @@ class Run:
             self.bad_joint_state(problem)
             return
         self.measured = np.clip(np.asarray(config, dtype=float), self.arm.lower, self.arm.upper)
+        if effort is not None and self.phase.active:
+            self._note_torque(effort)
         self.measured_at = now
         self.measured_velocity = velocity
         self._recent.append((now, self.measured))
@@ -477,6 +489,15 @@ class Run:
             self.retreat_done_at = now
             self._send_pending()
 
+    def _note_torque(self, effort: np.ndarray) -> None:
+        """Keep the largest external-torque estimate per joint (effort minus gravity)."""
+        effort = np.asarray(effort, dtype=float)
+        if effort.shape != self.measured.shape or not np.all(np.isfinite(effort)):
+            return
+        external = np.abs(external_torque(self.settings.detection, self.measured, effort))
+        self.torque_peak = external if self.torque_peak is None else \
+            np.maximum(self.torque_peak, external)
+
     def _check_rest(self) -> None:
         """Stop when the arm, at rest between commands, moves away on its own."""
         if self.rest_at is None:
@@ -530,16 +551,28 @@ class Run:
 
     def confirm(self, now: float) -> str:
         """
-        Send the path awaiting confirmation; return why not ('' when done).
+        Send the path awaiting confirmation; return why not ('' when sent).
 
-        An arm moved from the path's start since is planned for again (and that path waits).
+        Never from stale joint states (the run stops, as on its tick), nor once the arm has
+        moved from the path's start (its first edge would be uncosted): that path is then
+        dropped and another planned from where the arm is, which waits in turn.
         """
         self._now = now
         if self.phase is not Phase.AWAITING:
             return f'no path awaits confirmation (the run is {self.phase.value})'
+        self.tick(now)
+        if not self.active:
+            return self.message
+        origin = self._plan_origin(self._time())
+        moved = float(np.abs(self.proposed[0] - origin).sum())
+        if moved > self.settings.replan_tolerance:
+            self._replan_proposal(origin, f'the arm moved {moved:.3f} rad (L1) from the start '
+                                          f'of proposal {self.proposals}: not sent; planning '
+                                          f'another from where it is')
+            return self.message
         self.pending_path, self.proposed = self.proposed, None
         self.phase = Phase.PLANNING
-        self.message = f'path {self.loop.paths_tried} confirmed'
+        self.message = f'proposal {self.proposals} confirmed: path {self.loop.paths_tried}'
         self._confirmed = True
         try:
             self._send_pending()
@@ -552,11 +585,16 @@ class Run:
         self._now = now
         if self.phase is not Phase.AWAITING:
             return f'no path awaits confirmation (the run is {self.phase.value})'
-        start, self.proposed = self.proposed[0], None
-        self.loop.decline()
-        self.message = 'path declined: planning another'
-        self._plan_from(start)
+        self._replan_proposal(self._plan_origin(self._time()),
+                              f'proposal {self.proposals} declined: planning another')
         return ''
+
+    def _replan_proposal(self, origin: np.ndarray, message: str) -> None:
+        """Drop the proposed path (not a path tried) and plan again from origin."""
+        self.proposed = None
+        self.loop.decline()
+        self._plan_from(origin)
+        self.message = message
 
     def bad_joint_state(self, reason: str) -> None:
         """Stop an active run: a joint state was refused (it is not used for anything)."""
@@ -716,9 +754,11 @@ class Run:
     def _propose(self, path: np.ndarray) -> None:
         """Hold a planned path, the arm at rest, until confirm() or decline()."""
         self.proposed = path
+        self.proposals += 1
         self.phase = Phase.AWAITING
         self.retreat_done_at = None
-        self.message = (f'path {self.loop.paths_tried} planned: {len(path) - 1} edges, the '
+        self.message = (f'proposal {self.proposals} (path {self.loop.paths_tried}): '
+                        f'{len(path) - 1} edges, the '
                         f'flange travels {tip_travel(self.arm, path):.2f} m; ~/confirm_path '
                         f'sends it, ~/decline_path plans another, ~/stop ends the run')
         self._emit(Propose(path.copy()))
@@ -930,6 +970,9 @@ class Run:
             'replan_latencies_s': self.latencies,
             'outcome': self.outcome,
             'message': self.message,
+            # per joint, the largest external torque estimated from the efforts [Nm]
+            'peak_external_torque_nm': None if self.torque_peak is None else
+            [round(float(t), 1) for t in self.torque_peak],
             # the via points [rad] of the path awaiting confirmation (confirm_paths)
             'proposed_path': None if self.proposed is None else self.proposed.tolist(),
         }

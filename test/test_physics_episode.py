@@ -69,6 +69,20 @@ def test_a_driver_stopped_by_the_speed_monitoring_is_restarted_and_the_run_resum
         run_physics_episode('demo_hook', restarts=-1)
 
 
+def test_the_runs_external_torque_estimate_is_the_contacts_with_the_load_data_right():
+    # the planner's estimate, efforts minus g(q) with the hook's 0.4 kg, against the torques
+    # the contacts exerted (MuJoCo's J^T f): the status reports how hard the arm pressed
+    from probdis_ros.motion.detector import DetectorSettings
+    from probdis_ros.run import RunSettings
+
+    load = RunSettings(detection=DetectorSettings(load_mass=0.4, load_com=(0.0, 0.0, 0.12)))
+    episode = run_physics_episode('demo_hook', 'probabilistic', seed=1, max_paths=5,
+                                  run_settings=load)
+    truth = episode.external_torque_peak
+    assert truth.max() > 20.0       # the hook pressed on the bar
+    np.testing.assert_allclose(episode.estimated_torque_peak, truth, atol=0.05 * truth.max())
+
+
 def test_paths_confirmed_at_once_run_as_unconfirmed_ones_and_a_wait_holds_the_arm():
     from probdis_ros.run import RunSettings
 

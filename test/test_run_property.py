@@ -38,6 +38,7 @@ from probdis_ros.motion.state_check import BadJointStateError, StateCheck
 from probdis_ros.planning.disentangle import Disentangler
 from probdis_ros.run import (
     Learned,
+    Phase,
     PlanFrom,
     RELEASE_SCALING,
     Run,
@@ -142,13 +143,19 @@ def check_command(jtc: JtcTrajectory, limits) -> None:
     assert step <= allowed, f'velocity step of {step:.3f} rad/s in {SAMPLE} s'
 
 
-def drive(seed: int, steps: int = 1500, jtc_start: str = 'measured') -> dict:
-    """Run one random interleaving; return counts of what happened."""
+def drive(seed: int, steps: int = 1500, jtc_start: str = 'measured',
+          confirm: bool = False) -> dict:
+    """
+    Run one random interleaving; return counts of what happened.
+
+    ``confirm``: every path waits (confirm_paths) for an operator who confirms or declines
+    it at random moments.
+    """
     rng = np.random.default_rng(seed)
     settings = RunSettings(velocity_scaling=float(rng.choice([0.2, 0.5, 0.7])),
                            state_timeout=0.1,
                            detection=DetectorSettings(motion_delay=0.0, echo_time=0.0),
-                           jtc_start=jtc_start)
+                           jtc_start=jtc_start, confirm_paths=confirm)
     limits = settings.limits(ARM)
     if jtc_start == 'desired':       # a command pressed in past a blocked arm comes back faster
         limits = replace(limits, velocity_scaling=max(RELEASE_SCALING, limits.velocity_scaling))
@@ -156,7 +163,9 @@ def drive(seed: int, steps: int = 1500, jtc_start: str = 'measured') -> dict:
     world = World(start, limits.max_acceleration, jtc_start)
     gate = StateCheck(NAMES, ARM.lower, ARM.upper, ARM.velocity_limits)
     counts = {'commands': 0, 'refused': 0, 'learned': 0, 'starts': 0, 'stops': 0,
-              'ends_stopped': 0, 'paths_refused': 0, 'outcomes': set(), 'left_pressed': 0}
+              'ends_stopped': 0, 'paths_refused': 0, 'outcomes': set(), 'left_pressed': 0,
+              'paths': 0, 'confirms': 0, 'declines': 0}
+    confirming = [False]
     run: Run | None = None
     pending: list[tuple[float, Run, PlanFrom]] = []
     silent_until = -1.0
@@ -170,6 +179,12 @@ def drive(seed: int, steps: int = 1500, jtc_start: str = 'measured') -> dict:
                 sent = True
                 counts['commands'] += 1
                 check_command(world.take(action.command, t), limits)
+                if action.path is not None:
+                    counts['paths'] += 1
+                    assert confirming[0] or not confirm, 'a path sent without a confirm'
+                    # from where the arm is (measured) or JTC's command holds (desired)
+                    assert jtc_start == 'desired' or np.abs(
+                        action.path[0] - world.q).sum() <= settings.replan_tolerance + 0.02
             elif isinstance(action, StatusChanged) and not run.active and \
                     run.outcome != 'succeeded':
                 # every end but the goal (a timeout, a refused state, a planner error, a
@@ -237,6 +252,18 @@ def drive(seed: int, steps: int = 1500, jtc_start: str = 'measured') -> dict:
             run.tick(t)
             act(run, t)
         # the operator
+        if confirm and run is not None and run.phase is Phase.AWAITING and \
+                rng.random() < 0.05:
+            if rng.random() < 0.3:
+                counts['declines'] += 1
+                assert run.decline(t) == ''
+            else:
+                counts['confirms'] += 1
+                confirming[0] = True
+                run.confirm(t)
+                act(run, t)
+                confirming[0] = False
+            act(run, t)
         if rng.random() < 0.004 and run is not None:
             counts['stops'] += 1
             run.stop()
@@ -270,6 +297,50 @@ def test_no_command_leaves_the_limits_or_steps_in_velocity(seed, jtc_start):
     assert counts['starts'] and counts['commands'] and counts['refused']
     if jtc_start == 'desired':
         assert not counts['left_pressed']
+
+
+@pytest.mark.parametrize('jtc_start', JTC_STARTS)
+@pytest.mark.parametrize('seed', range(4))
+def test_with_confirm_paths_no_path_goes_unconfirmed_and_none_from_elsewhere(seed, jtc_start):
+    counts = drive(seed, steps=3000, jtc_start=jtc_start, confirm=True)
+    assert counts['confirms'] and counts['paths'] and counts['commands']
+
+
+def test_a_confirm_after_the_arm_moved_sends_nothing_and_plans_again():
+    class Straight:
+        def plan(self, start, goal, fmap, rng):
+            return Path(np.array([start, goal]))
+
+    q0 = np.zeros(7)
+    loop = Disentangler(ARM, Straight(), q0 + 0.5, max_paths=8, goal_tolerance=0.04)
+    run = Run(ARM, loop, RunSettings(confirm_paths=True))
+
+    def plans(t):
+        for action in [a for a in run.actions if isinstance(a, PlanFrom)]:
+            run.on_plan(loop.next_path(action.config))
+        sent = [a for a in run.actions if isinstance(a, Send)]
+        run.actions.clear()
+        return sent
+
+    run.start(0.0, q0)
+    assert not plans(0.0) and run.phase is Phase.AWAITING and loop.paths_tried == 1
+    moved = q0.copy()
+    moved[1] += 0.08       # more than replan_tolerance, less than a motion of something else
+    run.on_joint_state(0.01, moved, np.zeros(7))
+    reason = run.confirm(0.02)
+    assert 'moved 0.080 rad' in reason and 'not sent' in reason
+    assert not plans(0.02) and run.phase is Phase.AWAITING and loop.paths_tried == 1
+    np.testing.assert_allclose(run.proposed[0], moved)       # planned again from there
+    assert run.proposals == 2 and run.message.startswith('proposal 2')
+    assert run.confirm(0.03) == '' and run.phase is Phase.EXECUTING
+    # a confirm from stale joint states stops the run instead
+    run2 = Run(ARM, Disentangler(ARM, Straight(), q0 + 0.5, goal_tolerance=0.04),
+               RunSettings(confirm_paths=True, state_timeout=0.1))
+    run, loop = run2, run2.loop
+    run.start(0.0, q0)
+    plans(0.0)
+    assert 'joint states stopped arriving' in run.confirm(0.5)
+    assert run.phase is Phase.STOPPED
 
 
 def test_the_interleavings_reach_every_kind_of_event():

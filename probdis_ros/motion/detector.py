@@ -209,6 +209,13 @@ def gravity_model(load_mass: float, load_com: tuple[float, float, float]
     return GravityModel(load_mass=load_mass, load_com=load_com)
 
 
+def external_torque(settings: DetectorSettings, q: np.ndarray, effort: np.ndarray
+                    ) -> np.ndarray:
+    """Return the external-torque estimate [Nm]: measured efforts minus g(q) of arm and load."""
+    gravity = gravity_model(settings.load_mass, tuple(settings.load_com))
+    return np.asarray(effort, dtype=float) - gravity(q)
+
+
 class SentCommand:
     """
     The command as a driver sends it on, once per controller period, through its filter.

@@ -66,6 +66,9 @@ class PhysicsEpisode:
     sim_time_s: float
     wall_time_s: float
     scene: object = None
+    # per joint, the largest |effort - g(q)| the planner's runs estimated (their status's
+    # peak_external_torque_nm) [Nm]
+    estimated_torque_peak: np.ndarray | None = None
     loop: Disentangler | None = None
     message: str = ''
     commands: list = field(default_factory=list)
@@ -147,6 +150,8 @@ def run_physics_episode(scene: str, method: str | Method = 'probabilistic', seed
         raise ValueError(f'restarts must be >= 0, got {restarts}')
     if not 0.0 <= confirm_after < math.inf:
         raise ValueError(f'confirm_after must be finite and >= 0, got {confirm_after}')
+    if confirm_after and not (run_settings and run_settings.confirm_paths):
+        raise ValueError('confirm_after needs run_settings with confirm_paths')
     wall = time.perf_counter()
     method = Method.resolve(method) if isinstance(method, str) else method
     if robot_settings is None and run_settings is not None:
@@ -174,6 +179,7 @@ def run_physics_episode(scene: str, method: str | Method = 'probabilistic', seed
     proposed_at: list[float] = []         # when each path was proposed (confirm_paths)
     times, configs, velocities, gaps, forces, table_forces = [], [], [], [], [], []
     torque_peak = np.zeros(arm.n_joints)
+    estimate_peak = np.zeros(arm.n_joints)     # the runs' own, from the efforts
 
     def act() -> None:
         while run.actions:
@@ -216,11 +222,13 @@ def run_physics_episode(scene: str, method: str | Method = 'probabilistic', seed
             robot.step()
             if robot.stopped is None:       # a stopped driver reports nothing more
                 state = robot.joint_state()
-                run.on_joint_state(state.time, state.position, state.velocity)
+                run.on_joint_state(state.time, state.position, state.velocity, state.effort)
             run.tick(robot.time)
             act()
             confirm_due()
             record(run)
+        if run.torque_peak is not None:
+            np.maximum(estimate_peak, run.torque_peak, out=estimate_peak)
         if run.active:
             run.finish(State.STOPPED, f'time limit of {time_limit:.0f} s simulated reached')
         paths_used += loop.paths_tried
@@ -250,7 +258,7 @@ def run_physics_episode(scene: str, method: str | Method = 'probabilistic', seed
         paths=paths_used, failures=failures, times=np.array(times),
         configs=np.array(configs).reshape(-1, arm.n_joints), gaps=np.array(gaps),
         contact_force=np.array(forces), table_force=np.array(table_forces),
-        external_torque_peak=torque_peak,
+        external_torque_peak=torque_peak, estimated_torque_peak=estimate_peak,
         plan_times_s=[t for each in loops for t in each.plan_times],
         sim_time_s=robot.time, wall_time_s=time.perf_counter() - wall, scene=scene_doc,
         loop=loop, message='; then '.join(messages), commands=commands, restarted_at=restarted_at,

@@ -116,7 +116,7 @@ class KinematicEngine:
         self.time = 0.0
         self.q = np.zeros(arm.n_joints)
         self.qdot = np.zeros(arm.n_joints)
-        self.tau_measured = np.zeros(arm.n_joints)
+        self.tau_measured: np.ndarray | None = None     # no torques modelled
 
     def reset(self, q: np.ndarray) -> None:
         """Place the arm at q (and load the compiled FK now, not mid-run)."""
@@ -170,7 +170,7 @@ class JointStateSample:
     time: float
     position: np.ndarray
     velocity: np.ndarray
-    effort: np.ndarray
+    effort: np.ndarray | None      # the measured joint torques; None: the engine has none
 
 
 class SimulatedRobot:
@@ -305,7 +305,10 @@ class SimulatedRobot:
     def _state(self) -> JointStateSample:
         """Return what the driver's state interfaces hold now (no noise, no latency)."""
         e = self.engine
-        effort = np.asarray(getattr(e, 'tau_measured', np.zeros_like(e.q))).copy()
+        # the kinematic engine models no torques: its states carry none (zeros would read as
+        # the whole of gravity pressing on the arm)
+        torques = getattr(e, 'tau_measured', None)
+        effort = None if torques is None else np.asarray(torques).copy()
         if self.settings.echo:
             sent = self.filter.value.copy()
             velocity = (sent - self._sent_before) / self.settings.period

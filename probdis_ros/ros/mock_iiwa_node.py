@@ -19,7 +19,8 @@ mock_iiwa_node: a simulated LBR iiwa for tests and demos, with hidden obstacles.
 It stands where the lbr stack's driver and joint_trajectory_controller stand: commands on
 the JTC topic go through JTC's own interpolation rules (:mod:`probdis_ros.motion.jtc`), the
 driver's command filter and an arm (:mod:`probdis_ros.physics.simulated_robot`), and joint
-states (positions, velocities, efforts) come out at the controller rate.  ``engine``
+states (positions, velocities, and the physics arm's measured torques as efforts) come out
+at the controller rate.  ``engine``
 chooses the arm:
 
 * ``physics`` (default): MuJoCo in joint impedance with a scene of rigid and yielding
@@ -277,7 +278,7 @@ class MockIiwa(Node):
         msg.name = list(self.joint_names)
         msg.position = state.position.tolist()
         msg.velocity = state.velocity.tolist()
-        msg.effort = state.effort.tolist()
+        msg.effort = [] if state.effort is None else state.effort.tolist()
         self.pub.publish(msg)
 
 

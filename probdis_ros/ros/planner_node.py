@@ -190,7 +190,7 @@ PARAMETERS = {
         description='each planned path waits, the arm at rest, for ~/confirm_path (or '
                     '~/decline_path: plan another) before it is sent, and the status and '
                     "markers show it first (a first session in T1); retreats and stops don't "
-                    'wait')),
+                    'wait; read at ~/start')),
     'd_dist': (DETECT.d_dist, _float('L1 gap [rad] above which a stalled motion is blocked',
                                      0.001, 1.0)),
     'stall_time': (DETECT.stall_time, _float('time without progress that counts as stalled '
@@ -959,8 +959,10 @@ class PlannerNode(Node):
             response.message = 'no path awaits confirmation' + (
                 f' (the run is {run.phase.value})' if run is not None else '')
             return response
-        self._guarded(getattr(run, answer), self._now())
-        response.success, response.message = run.active, run.message
+        answers: list[str] = []
+        self._guarded(lambda now: answers.append(getattr(run, answer)(now)), self._now())
+        response.success = answers == ['']          # '' : done; else why not
+        response.message = answers[0] if answers and answers[0] else run.message
         return response
 
     def _on_reset_map(self, request, response):
@@ -1065,7 +1067,11 @@ class PlannerNode(Node):
         if self._ended_run is self.run:
             return
         self._ended_run = self.run
-        self.get_logger().info(f'run ended: {self.run.outcome}: {self.run.message}')
+        peak = self.run.torque_peak
+        pressed = '' if peak is None else (
+            f' (peak external torque {peak.max():.1f} Nm at A{int(peak.argmax()) + 1}, '
+            f'efforts minus gravity)')
+        self.get_logger().info(f'run ended: {self.run.outcome}: {self.run.message}{pressed}')
         if self.recorder is not None:
             self.recorder_close_at = self._now() + 0.5
         if self.run.outcome in ('succeeded', 'gave_up'):

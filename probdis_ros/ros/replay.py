@@ -39,7 +39,12 @@ from pathlib import Path
 import numpy as np
 from probdis_ros.model import FailureMap, iiwa_arm
 from probdis_ros.motion.cartesian_speed import point_speeds
-from probdis_ros.motion.detector import BlockDetector, DetectorSettings, Verdict
+from probdis_ros.motion.detector import (
+    BlockDetector,
+    DetectorSettings,
+    external_torque,
+    Verdict,
+)
 from probdis_ros.motion.jtc import (
     JTC_STARTS,
     JtcTrajectory,
@@ -122,6 +127,8 @@ class ReplayResult:
     velocities: list[np.ndarray | None] = field(default_factory=list)   # as reported
     problems: list[str] = field(default_factory=list)
     settings: DetectorSettings | None = None    # what the detector ran with
+    # per joint, the largest |effort - g(q)| (load data as recorded) [Nm]; None: no efforts
+    torque_peak: np.ndarray | None = None
 
     @property
     def peak_gap(self) -> float:
@@ -156,7 +163,9 @@ class ReplayResult:
                            for b in self.blocks],
                 'failures': len(self.fmap) if self.fmap is not None else 0,
                 'success': self.success, 'peak_gap_rad': self.peak_gap,
-                'peak_point_speed_mps': self.peak_point_speed}
+                'peak_point_speed_mps': self.peak_point_speed,
+                'peak_external_torque_nm': None if self.torque_peak is None else
+                [round(float(t), 1) for t in self.torque_peak]}
 
 
 def replay(bag: str | Path, joint_states_topic: str = JOINT_STATES_TOPIC,
@@ -329,11 +338,16 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
         result.times.append(t)
         result.configs.append(q)
         result.velocities.append(v)
+        # the measured torques, where the driver sends them (the torque ceiling's estimate)
+        effort = values_by_name(msg.name, msg.effort, names)
+        if effort is not None:
+            pushed = np.abs(external_torque(settings, q, effort))
+            result.torque_peak = pushed if result.torque_peak is None else \
+                np.maximum(result.torque_peak, pushed)
         if detector is None:
             result.gaps.append(0.0)
             continue
-        # the measured torques, where the driver sends them (the torque ceiling's estimate)
-        verdict = detector.update(t, q, values_by_name(msg.name, msg.effort, names))
+        verdict = detector.update(t, q, effort)
         result.gaps.append(detector.gap)
         if verdict is not Verdict.MOVING:
             pressed = verdict is Verdict.BLOCKED
