@@ -77,3 +77,28 @@ def test_the_torque_ceiling_needs_the_load_data_and_waits_without_efforts():
         DetectorSettings(torque_ceiling=-1.0)
     with pytest.raises(ValueError, match='load_com'):
         DetectorSettings(load_com=(0.0, 0.1))
+
+
+@pytest.mark.parametrize('efforts, verdict', [
+    ('held', Verdict.BLOCKED), ('idle', Verdict.NOT_EXECUTED), (None, Verdict.NOT_EXECUTED)])
+def test_an_arm_that_never_moves_is_held_if_its_torques_rise_and_unrun_if_not(efforts, verdict):
+    # a path from rest that should move A2 by 0.4 rad; the arm stays where it is.  Held by
+    # something, the impedance's spring pulls it toward the command (200 Nm/rad x the gap);
+    # with no controller running the command, its torques stay as they were (here 3 Nm off
+    # for load data a little wrong): no block to learn
+    gravity = GravityModel()
+    times = np.linspace(0.0, 1.0, 11)
+    path = HELD + np.outer(times, [0, 0.4, 0, 0, 0, 0, 0])
+    command = JtcTrajectory(TrajectoryCommand(times, path), HELD, np.zeros(7))
+    detector = BlockDetector(command, 0.0, DetectorSettings(), expect_motion=True,
+                             gravity=gravity)
+    found = Verdict.MOVING
+    for t in np.arange(0.01, 3.0, 0.01):
+        desired = command.sample(t - detector.settings.motion_delay)[0]
+        effort = {'held': gravity(HELD) + 200.0 * (desired - HELD),
+                  'idle': gravity(HELD) + 3.0, None: None}[efforts]
+        found = detector.update(t, HELD, effort)
+        if found is not Verdict.MOVING:
+            break
+    assert found is verdict, detector.reason
+    assert ('held where it stood' in detector.reason) == (verdict is Verdict.BLOCKED)

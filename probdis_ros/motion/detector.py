@@ -42,7 +42,9 @@ joint impedance follows its command with a lag) with where it is.  The L1 gap
   a free arm), when a gap-based block is seen, ``START_WAIT`` has passed (or a gap exceeds
   its ceiling: the force stays bounded while a late controller is waited for), and the arm
   has not moved at all since the command began: nothing executes the command (an inactive
-  controller), or something else holds the arm; that is no block to learn.  An arm that
+  controller), or something else holds the arm; that is no block to learn.  Where the joint
+  states carry efforts, an arm whose external torque rose by ``HELD_TORQUE_RISE`` meanwhile
+  is held where it stood (the command runs and pulls it): blocked.  An arm that
   begins to move later than the command said (a large message delivered late, a busy
   controller) was started late by its controller: the command is judged from when it began
   (the trajectory's ``taken_at`` moves on by the delay), not taken for a block.
@@ -89,6 +91,11 @@ ENDS = 0.05
 #: (or sooner, once a gap passes its ceiling: an arm held from rest presses no harder while
 #: the controller may still be taking the command late than a blocked one does).
 START_WAIT = 2.0
+#: [Nm, L1 over the joints] an arm that has not moved while its external-torque estimate rose
+#: this much since the command began is held by something: JTC runs the command and the
+#: impedance's spring pulls the arm toward it (200 Nm/rad x the gap: 20 Nm at d_dist), where
+#: a controller that runs nothing leaves the torques as they were.
+HELD_TORQUE_RISE = 5.0
 #: A controller that took a command later than this [s] after it was sent took it late.
 LATE_TAKE = 0.05
 #: An echo is looked for this far [s] either way of a state's time (the controller's phase
@@ -297,6 +304,7 @@ class BlockDetector:
         self.gap = 0.0
         self.joint_gaps = np.zeros(0)
         self.external_torque: np.ndarray | None = None
+        self._torque_at_start: np.ndarray | None = None
         self.onset: Onset | None = None
         self.reason = ''
 
@@ -333,9 +341,13 @@ class BlockDetector:
         if self._pressed is not None:
             if not self._released(now, t, desired, measured, ended):
                 return Verdict.MOVING
-        if s.torque_ceiling and self.gravity is not None and effort is not None and \
-                len(effort) == len(measured):
+        if effort is not None and len(effort) == len(measured):
+            if self.gravity is None:
+                self.gravity = gravity_model(s.load_mass, s.load_com)
             self.external_torque = np.asarray(effort, dtype=float) - self.gravity(measured)
+            if self._torque_at_start is None:
+                self._torque_at_start = self.external_torque
+        if s.torque_ceiling and self.external_torque is not None:
             over = np.abs(self.external_torque) - s.torque_ceiling
             if over.max() > 0:
                 joint = int(over.argmax())
@@ -449,8 +461,16 @@ class BlockDetector:
             if self._history[-1][0] - self.start_time < START_WAIT and within:
                 return Verdict.MOVING             # the controller may take it late
             moved, _ = self.moved()
-            self.reason = (f'the arm has not moved since the command began ({moved:.3f} rad '
-                           f'L1 in {self._history[-1][0] - self.start_time:.2f} s, {reason})')
+            still = (f'the arm has not moved since the command began ({moved:.3f} rad L1 in '
+                     f'{self._history[-1][0] - self.start_time:.2f} s, {reason})')
+            if self.external_torque is not None:
+                rise = np.abs(self.external_torque - self._torque_at_start)
+                if rise.sum() >= HELD_TORQUE_RISE:
+                    joint = int(rise.argmax())
+                    return self._blocked(f'held where it stood: {still}, while its external '
+                                         f'torque rose by {rise.sum():.1f} Nm (L1; A{joint + 1} '
+                                         f'{rise[joint]:.1f} Nm)')
+            self.reason = still
             return Verdict.NOT_EXECUTED
         return self._blocked(reason)
 
