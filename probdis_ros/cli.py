@@ -868,7 +868,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
     result = run_demo(world, args.timeout, quiet=args.json, engine=args.engine,
                       sim_time=args.sim_time, jtc_start=args.jtc_start,
                       extra_mock_args=('-p', f'clock_offset:={args.arm_clock_offset!r}'),
-                      extra_planner_args=('-p', f'cartesian_speed_limit:={float(limit)!r}'))
+                      extra_planner_args=('-p', f'cartesian_speed_limit:={float(limit)!r}'),
+                      confirm=args.confirm)
     summary = {k: result[k] for k in ('success', 'paths', 'failures', 'replan_latency_s',
                                       'bag')}
     if args.json:
@@ -1194,6 +1195,10 @@ def build_parser() -> argparse.ArgumentParser:
                       'computer whose clock is not synchronised (default 0)')
     _jtc_start_argument(demo)
     _cartesian_speed_argument(demo)
+    demo.add_argument('--confirm', action='store_true',
+                      help="the planner's confirm_paths, as in a first session in T1: each "
+                      'planned path waits for your answer on the terminal (Enter: send it, '
+                      'n: plan another, s: stop)')
     demo.add_argument('--json', action='store_true',
                       help='print {"success", "paths", "failures", "replan_latency_s", '
                       '"bag"}')

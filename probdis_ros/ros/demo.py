@@ -141,6 +141,28 @@ def start_disentangling(client, planner: subprocess.Popen, mock: subprocess.Pope
         time.sleep(0.2)
 
 
+#: What the operator types, and the planner service it calls (an empty line: confirm).
+ANSWERS = {'': 'confirm_path', 'y': 'confirm_path', 'n': 'decline_path', 's': 'stop'}
+
+
+def ask_operator(read=None, say=None) -> str:
+    """
+    Ask on the terminal what to do with the path that awaits confirmation; return the service.
+
+    Enter or y sends it, n plans another, s stops the run (so does the end of the input).
+    """
+    read = read or sys.stdin.readline
+    say = say or (lambda text: print(text, end='', file=sys.stderr, flush=True))
+    while True:
+        say('demo: send this path? [Enter/y] send, [n] plan another, [s] stop: ')
+        line = read()
+        if not line:
+            return 'stop'
+        service = ANSWERS.get(line.strip().lower())
+        if service:
+            return service
+
+
 def world_of(world: str, engine: str) -> tuple[Path, str, np.ndarray, float]:
     """
     Return a world's file, name, goal and the reach of its grasped object about the flange.
@@ -158,8 +180,8 @@ def world_of(world: str, engine: str) -> tuple[Path, str, np.ndarray, float]:
 def run_demo(world: str = DEFAULT_SCENE, timeout: float = 300.0, quiet: bool = False,
              extra_planner_args: tuple[str, ...] = (), engine: str = 'physics',
              sim_time: bool = False, real_time_factor: float = 5.0,
-             extra_mock_args: tuple[str, ...] = (), jtc_start: str = DEFAULT_JTC_START
-             ) -> dict:
+             extra_mock_args: tuple[str, ...] = (), jtc_start: str = DEFAULT_JTC_START,
+             confirm: bool = False) -> dict:
     """
     Run a disentangling against the mock iiwa; return the outcome summary.
 
@@ -168,6 +190,8 @@ def run_demo(world: str = DEFAULT_SCENE, timeout: float = 300.0, quiet: bool = F
     can) and the planner follows its /clock; timeout stays in wall-clock seconds.
     jtc_start: where the mock's controller starts a command, and the planner models it
     (``interpolate_from_desired_state``: 'desired'), checked by the planner against the mock.
+    confirm: the planner's ``confirm_paths``; each path waits for an answer on standard input
+    (:func:`ask_operator`), whose time the timeout does not count.
     """
     from probdis_ros.ros.client import PlannerClient
 
@@ -189,7 +213,8 @@ def run_demo(world: str = DEFAULT_SCENE, timeout: float = 300.0, quiet: bool = F
             'probdis_ros.ros.planner_node', '--params-file', params, '-p', f'goal:={goal}',
             '-p', f'map_file:={Path(tmp) / "map.json"}', *desired,
             '-p', f'controller_node:=/{MOCK_NODE}', '-p', f'object_radius:={object_radius}',
-            *(('-p', 'use_sim_time:=true') if sim_time else ()), *extra_planner_args), env=env)
+            *(('-p', 'use_sim_time:=true') if sim_time else ()),
+            '-p', f'confirm_paths:={str(confirm).lower()}', *extra_planner_args), env=env)
         status: dict = {}
         try:
             with PlannerClient() as client:
@@ -209,6 +234,12 @@ def run_demo(world: str = DEFAULT_SCENE, timeout: float = 300.0, quiet: bool = F
                         say(f'[{time.monotonic() - t0:6.1f} s] {status["state"]:<10} '
                             f'paths {status["paths"]:>2}  failures {status["failures"]:>2}  '
                             f'{status["message"]}')
+                        if status['state'] == 'awaiting_confirmation':
+                            asked = time.monotonic()
+                            service = ask_operator()
+                            t0 += time.monotonic() - asked
+                            _, message = client.call(service)
+                            say(f'demo: {service}: {message}')
         finally:
             codes = (stop_process(planner), stop_process(mock))
     latencies = status.get('replan_latencies_s') or [0.0]
