@@ -973,6 +973,7 @@ class Run:
             # per joint, the largest external torque estimated from the efforts [Nm]
             'peak_external_torque_nm': None if self.torque_peak is None else
             [round(float(t), 1) for t in self.torque_peak],
+            'proposal': self.proposals,
             # the via points [rad] of the path awaiting confirmation (confirm_paths)
             'proposed_path': None if self.proposed is None else self.proposed.tolist(),
         }

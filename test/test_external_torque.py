@@ -80,13 +80,17 @@ def test_the_torque_ceiling_needs_the_load_data_and_waits_without_efforts():
 
 
 @pytest.mark.parametrize('efforts, verdict', [
-    ('held', Verdict.BLOCKED), ('idle', Verdict.NOT_EXECUTED), (None, Verdict.NOT_EXECUTED)])
+    ('held', Verdict.BLOCKED), ('held, noisy', Verdict.BLOCKED),
+    ('idle', Verdict.NOT_EXECUTED), ('idle, noisy', Verdict.NOT_EXECUTED),
+    ('pushed against the pull', Verdict.NOT_EXECUTED), (None, Verdict.NOT_EXECUTED)])
 def test_an_arm_that_never_moves_is_held_if_its_torques_rise_and_unrun_if_not(efforts, verdict):
     # a path from rest that should move A2 by 0.4 rad; the arm stays where it is.  Held by
     # something, the impedance's spring pulls it toward the command (200 Nm/rad x the gap);
     # with no controller running the command, its torques stay as they were (here 3 Nm off
-    # for load data a little wrong): no block to learn
+    # for load data a little wrong, and noise of 1 Nm per sample and joint), or change the
+    # other way (a hand on the arm): no block to learn
     gravity = GravityModel()
+    rng = np.random.default_rng(0)
     times = np.linspace(0.0, 1.0, 11)
     path = HELD + np.outer(times, [0, 0.4, 0, 0, 0, 0, 0])
     command = JtcTrajectory(TrajectoryCommand(times, path), HELD, np.zeros(7))
@@ -94,9 +98,11 @@ def test_an_arm_that_never_moves_is_held_if_its_torques_rise_and_unrun_if_not(ef
                              gravity=gravity)
     found = Verdict.MOVING
     for t in np.arange(0.01, 3.0, 0.01):
-        desired = command.sample(t - detector.settings.motion_delay)[0]
-        effort = {'held': gravity(HELD) + 200.0 * (desired - HELD),
-                  'idle': gravity(HELD) + 3.0, None: None}[efforts]
+        spring = 200.0 * (command.sample(t - detector.settings.motion_delay)[0] - HELD)
+        noise = rng.normal(0.0, 1.0, 7) if 'noisy' in str(efforts) else 0.0
+        effort = {'held': gravity(HELD) + spring + noise, 'idle': gravity(HELD) + 3.0 + noise,
+                  'pushed against the pull': gravity(HELD) - spring,
+                  'None': None}[str(efforts).split(',')[0]]
         found = detector.update(t, HELD, effort)
         if found is not Verdict.MOVING:
             break

@@ -219,7 +219,7 @@ def test_demo_disentangles_through_two_processes_and_its_bag_replays_the_same(en
 def test_demo_with_confirm_asks_before_each_path_and_takes_the_answers(env, tmp_path):
     # the operator declines the first path, then sends every path with Enter
     env['ROS_HOME'] = str(tmp_path)
-    result = subprocess.run(probdis_command() + ['demo', '--engine', 'kinematic', '--confirm'],
+    result = subprocess.run([*probdis_command(), 'demo', '--engine', 'kinematic', '--confirm'],
                             env=env, capture_output=True, text=True, timeout=400,
                             input='n\n' + '\n' * 30)
     assert result.returncode == 0, result.stderr[-2000:]

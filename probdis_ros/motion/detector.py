@@ -43,8 +43,8 @@ joint impedance follows its command with a lag) with where it is.  The L1 gap
   its ceiling: the force stays bounded while a late controller is waited for), and the arm
   has not moved at all since the command began: nothing executes the command (an inactive
   controller), or something else holds the arm; that is no block to learn.  Where the joint
-  states carry efforts, an arm whose external torque rose by ``HELD_TORQUE_RISE`` meanwhile
-  is held where it stood (the command runs and pulls it): blocked.  An arm that
+  states carry efforts, an arm whose external torque rose by ``HELD_TORQUE_RISE`` toward the
+  command meanwhile is held where it stood (the command runs and pulls it): blocked.  An arm that
   begins to move later than the command said (a large message delivered late, a busy
   controller) was started late by its controller: the command is judged from when it began
   (the trajectory's ``taken_at`` moves on by the delay), not taken for a block.
@@ -92,9 +92,10 @@ ENDS = 0.05
 #: the controller may still be taking the command late than a blocked one does).
 START_WAIT = 2.0
 #: [Nm, L1 over the joints] an arm that has not moved while its external-torque estimate rose
-#: this much since the command began is held by something: JTC runs the command and the
-#: impedance's spring pulls the arm toward it (200 Nm/rad x the gap: 20 Nm at d_dist), where
-#: a controller that runs nothing leaves the torques as they were.
+#: this much toward the command since the command began (means over ENDS) is held by
+#: something: JTC runs the command and the impedance's spring pulls the arm toward it
+#: (200 Nm/rad x the gap: 20 Nm at d_dist), where a controller that runs nothing leaves the
+#: torques as they were, but for their noise.
 HELD_TORQUE_RISE = 5.0
 #: A controller that took a command later than this [s] after it was sent took it late.
 LATE_TAKE = 0.05
@@ -304,7 +305,10 @@ class BlockDetector:
         self.gap = 0.0
         self.joint_gaps = np.zeros(0)
         self.external_torque: np.ndarray | None = None
-        self._torque_at_start: np.ndarray | None = None
+        # external-torque estimates of the first and of the last ENDS seconds (with efforts)
+        self._first_torques: list[np.ndarray] = []
+        self._torques: deque[tuple[float, np.ndarray]] = deque()
+        self._pull = np.zeros(0)        # the command less the arm at the last sample [rad]
         self.onset: Onset | None = None
         self.reason = ''
 
@@ -320,7 +324,8 @@ class BlockDetector:
         t = now - self.start_time
         measured = np.asarray(measured, dtype=float)
         desired, velocity = self._desired(t)
-        self.joint_gaps = np.abs(desired - measured)
+        self._pull = desired - measured
+        self.joint_gaps = np.abs(self._pull)
         self.gap = float(self.joint_gaps.sum())
         allowance = s.speed_allowance * np.abs(velocity)
         self._track_onset(now, measured, velocity, s.onset_gap + float(allowance.sum()))
@@ -345,8 +350,11 @@ class BlockDetector:
             if self.gravity is None:
                 self.gravity = gravity_model(s.load_mass, s.load_com)
             self.external_torque = np.asarray(effort, dtype=float) - self.gravity(measured)
-            if self._torque_at_start is None:
-                self._torque_at_start = self.external_torque
+            if t <= ENDS or not self._first_torques:
+                self._first_torques.append(self.external_torque)
+            self._torques.append((now, self.external_torque))
+            while self._torques[0][0] < now - ENDS:
+                self._torques.popleft()
         if s.torque_ceiling and self.external_torque is not None:
             over = np.abs(self.external_torque) - s.torque_ceiling
             if over.max() > 0:
@@ -463,16 +471,30 @@ class BlockDetector:
             moved, _ = self.moved()
             still = (f'the arm has not moved since the command began ({moved:.3f} rad L1 in '
                      f'{self._history[-1][0] - self.start_time:.2f} s, {reason})')
-            if self.external_torque is not None:
-                rise = np.abs(self.external_torque - self._torque_at_start)
-                if rise.sum() >= HELD_TORQUE_RISE:
-                    joint = int(rise.argmax())
-                    return self._blocked(f'held where it stood: {still}, while its external '
-                                         f'torque rose by {rise.sum():.1f} Nm (L1; A{joint + 1} '
-                                         f'{rise[joint]:.1f} Nm)')
+            rise = self._held_rise()
+            if rise.sum() >= HELD_TORQUE_RISE:
+                joint = int(rise.argmax())
+                return self._blocked(f'held where it stood: {still}, while its external '
+                                     f'torque rose by {rise.sum():.1f} Nm toward the command '
+                                     f'(L1; A{joint + 1} {rise[joint]:.1f} Nm)')
             self.reason = still
             return Verdict.NOT_EXECUTED
         return self._blocked(reason)
+
+    def _held_rise(self) -> np.ndarray:
+        """
+        Return per joint how far the external torque rose toward the command [Nm] (zeros: none).
+
+        The mean of the last ``ENDS`` seconds against the first's, on the joints the command
+        pulls (beyond ``PRESS_TOLERANCE``), counted in the pull's direction only: the spring
+        of a held arm pulls toward the command; noise and an arm pushed by hand need not.
+        """
+        if not self._first_torques or not self._torques:
+            return np.zeros(len(self._pull))
+        first = np.mean(self._first_torques, axis=0)
+        last = np.mean([torque for _, torque in self._torques], axis=0)
+        pull = np.where(np.abs(self._pull) > PRESS_TOLERANCE, np.sign(self._pull), 0.0)
+        return np.maximum(0.0, pull * (last - first))
 
     def _blocked(self, reason: str) -> Verdict:
         self.reason = reason

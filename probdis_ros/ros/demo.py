@@ -223,6 +223,7 @@ def run_demo(world: str = DEFAULT_SCENE, timeout: float = 300.0, quiet: bool = F
                 message = start_disentangling(client, planner, mock, say)
                 say(f'demo: start: {message}')
                 t0 = time.monotonic()           # the run's timeout counts from its start
+                asked_for = None
                 while status.get('state') not in FINISHED:
                     if time.monotonic() - t0 > timeout:
                         raise TimeoutError(f'no outcome within {timeout:.0f} s')
@@ -234,7 +235,9 @@ def run_demo(world: str = DEFAULT_SCENE, timeout: float = 300.0, quiet: bool = F
                         say(f'[{time.monotonic() - t0:6.1f} s] {status["state"]:<10} '
                             f'paths {status["paths"]:>2}  failures {status["failures"]:>2}  '
                             f'{status["message"]}')
-                        if status['state'] == 'awaiting_confirmation':
+                        if status['state'] == 'awaiting_confirmation' and \
+                                status.get('proposal') != asked_for:
+                            asked_for = status.get('proposal')     # once per proposal
                             asked = time.monotonic()
                             service = ask_operator()
                             t0 += time.monotonic() - asked
