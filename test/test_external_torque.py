@@ -56,7 +56,7 @@ def test_pressing_into_an_obstacle_is_seen_as_the_contact_torque():
 def test_the_torque_ceiling_declares_a_block_at_once_whatever_the_gap(ceiling, extra, verdict):
     gravity = GravityModel()
     settings = DetectorSettings(torque_ceiling=ceiling)
-    detector = BlockDetector(hold(HELD), 0.0, settings, gravity=gravity)
+    detector = BlockDetector(hold(HELD), 0.0, settings)
     effort = gravity(HELD) + np.array([0, extra, 0, 0, 0, 0, 0])
     assert detector.update(0.1, HELD, effort) is verdict      # the gap is zero
     if verdict is Verdict.BLOCKED:
@@ -94,8 +94,7 @@ def test_an_arm_that_never_moves_is_held_if_its_torques_rise_and_unrun_if_not(ef
     times = np.linspace(0.0, 1.0, 11)
     path = HELD + np.outer(times, [0, 0.4, 0, 0, 0, 0, 0])
     command = JtcTrajectory(TrajectoryCommand(times, path), HELD, np.zeros(7))
-    detector = BlockDetector(command, 0.0, DetectorSettings(), expect_motion=True,
-                             gravity=gravity)
+    detector = BlockDetector(command, 0.0, DetectorSettings(), expect_motion=True)
     found = Verdict.MOVING
     for t in np.arange(0.01, 3.0, 0.01):
         spring = 200.0 * (command.sample(t - detector.settings.motion_delay)[0] - HELD)

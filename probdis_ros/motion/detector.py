@@ -272,7 +272,6 @@ class BlockDetector:
     """
 
     def __init__(self, path, start_time: float, settings: DetectorSettings | None = None,
-                 gravity: Callable[[np.ndarray], np.ndarray] | None = None,
                  expect_motion: bool = False,
                  pressed_start: tuple[np.ndarray, np.ndarray] | None = None) -> None:
         self.path = path
@@ -291,9 +290,6 @@ class BlockDetector:
         self.late = 0.0                         # how late the controller took the command [s]
         self._first: list[np.ndarray] = []     # the samples of the first ENDS seconds
         self.settings = settings or DetectorSettings()
-        if gravity is None and self.settings.torque_ceiling:
-            gravity = gravity_model(self.settings.load_mass, self.settings.load_com)
-        self.gravity = gravity          # g(q) for the external-torque estimate
         self.start_time = start_time
         self._history: deque[tuple[float, np.ndarray]] = deque()
         self._rising: tuple[float, np.ndarray, np.ndarray] | None = None
@@ -347,9 +343,7 @@ class BlockDetector:
             if not self._released(now, t, desired, measured, ended):
                 return Verdict.MOVING
         if effort is not None and len(effort) == len(measured):
-            if self.gravity is None:
-                self.gravity = gravity_model(s.load_mass, s.load_com)
-            self.external_torque = np.asarray(effort, dtype=float) - self.gravity(measured)
+            self.external_torque = external_torque(s, measured, effort)
             if t <= ENDS or not self._first_torques:
                 self._first_torques.append(self.external_torque)
             self._torques.append((now, self.external_torque))

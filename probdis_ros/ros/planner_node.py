@@ -78,7 +78,6 @@ from probdis_ros.ros.recorder import BagRecorder, message_types
 from probdis_ros.run import (
     Learned,
     MAX_VELOCITY_SCALING,
-    Phase,
     PlanCancelledError,
     PlanFrom,
     Propose,
@@ -954,10 +953,8 @@ class PlannerNode(Node):
 
     def _answer_proposal(self, response, answer: str):
         run = self.run
-        if run is None or run.phase is not Phase.AWAITING:
-            response.success = False
-            response.message = 'no path awaits confirmation' + (
-                f' (the run is {run.phase.value})' if run is not None else '')
+        if run is None:
+            response.success, response.message = False, 'no path awaits confirmation'
             return response
         answers: list[str] = []
         self._guarded(lambda now: answers.append(getattr(run, answer)(now)), self._now())
