@@ -265,6 +265,11 @@ class Propose:
 
 
 @dataclass(frozen=True)
+class Withdrawn:
+    """The path shown awaiting confirmation was dropped (declined, replanned, run ended)."""
+
+
+@dataclass(frozen=True)
 class Learned:
     """A block was detected and one failure added to the map."""
 
@@ -591,7 +596,7 @@ class Run:
 
     def _replan_proposal(self, origin: np.ndarray, message: str) -> None:
         """Drop the proposed path (not a path tried) and plan again from origin."""
-        self.proposed = None
+        self._withdraw()
         self.loop.decline()
         self._plan_from(origin)
         self.message = message
@@ -764,6 +769,12 @@ class Run:
         self._emit(Propose(path.copy()))
         self._emit(StatusChanged())
 
+    def _withdraw(self) -> None:
+        """Drop the path awaiting confirmation, if any, so that it is no longer shown."""
+        if self.proposed is not None:
+            self.proposed = None
+            self._emit(Withdrawn())
+
     def _send(self, motion: Motion, path: np.ndarray | None = None,
               planned_at: float | None = None) -> None:
         """
@@ -882,7 +893,7 @@ class Run:
         self.outcome = state.value
         self.plan_pending = False
         self.pending_path = None
-        self.proposed = None
+        self._withdraw()
         if self.detector is not None:   # held now only if its command began pressed in, not back
             self.pressed = self.detector.pressed
         self.detector = None

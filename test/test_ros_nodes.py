@@ -37,10 +37,11 @@ from probdis_ros.ros.replay import replay
 from probdis_ros.sim.worlds import load_world
 import pytest
 from rclpy.parameter import Parameter
-from rclpy.qos import qos_profile_sensor_data
+from rclpy.qos import DurabilityPolicy, qos_profile_sensor_data, QoSProfile
 from ros_harness import JOINTS, RosTest, wait_for
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
+from visualization_msgs.msg import MarkerArray
 
 pytestmark = pytest.mark.ros
 WORLD = load_world(scenario_path('demo_iiwa'))
@@ -584,6 +585,11 @@ def test_a_clock_step_on_the_arm_stops_the_run_with_a_stop_jtc_takes(ros, tmp_pa
 def test_with_confirm_paths_each_path_waits_for_the_operator(ros, tmp_path):
     planner(ros, tmp_path, confirm_paths=True)
     arm = mock(ros)
+    drawn = []          # per markers message: does it draw a path?
+    ros.probe.create_subscription(
+        MarkerArray, '/probdis_planner/markers',
+        lambda m: drawn.append(any(k.ns == 'planned_path' for k in m.markers)),
+        QoSProfile(depth=10, durability=DurabilityPolicy.TRANSIENT_LOCAL))
 
     def awaiting():
         return ros.status.get('state') == 'awaiting_confirmation'
@@ -598,13 +604,17 @@ def test_with_confirm_paths_each_path_waits_for_the_operator(ros, tmp_path):
     time.sleep(0.5)
     assert not ros.trajectories, 'nothing is sent while the path waits'
     np.testing.assert_allclose(arm.q, START, atol=1e-3)
+    wait_for(lambda: drawn and drawn[-1], 5, 'the proposal drawn')
     # declined: another plan from the same start, not counted as a path tried
+    shown = len(drawn)
     declined = ros.call('decline_path')
     assert declined.success and 'declined' in declined.message
     wait_for(lambda: awaiting() and ros.status['proposed_path'] is not None
              and ros.status['message'].startswith('proposal 2'), 20,
              'a second proposal')
     assert ros.status['paths'] == 1 and not ros.trajectories
+    wait_for(lambda: drawn[-1], 5, 'the second proposal drawn')
+    assert False in drawn[shown:], 'the declined path was not taken off the markers'
     confirms = 0
     while not finished(ros):
         if awaiting():

@@ -40,11 +40,13 @@ from probdis_ros.run import (
     Learned,
     Phase,
     PlanFrom,
+    Propose,
     RELEASE_SCALING,
     Run,
     RunSettings,
     Send,
     StatusChanged,
+    Withdrawn,
 )
 import pytest
 
@@ -341,6 +343,41 @@ def test_a_confirm_after_the_arm_moved_sends_nothing_and_plans_again():
     plans(0.0)
     assert 'joint states stopped arriving' in run.confirm(0.5)
     assert run.phase is Phase.STOPPED
+
+
+def test_a_path_declined_or_stopped_while_it_waits_is_withdrawn_from_view():
+    """The node stops drawing a proposal on Withdrawn: declined, stopped, not when sent."""
+    class Straight:
+        def plan(self, start, goal, fmap, rng):
+            return Path(np.array([start, goal]))
+
+    q0 = np.zeros(7)
+    run = Run(ARM, Disentangler(ARM, Straight(), q0 + 0.5, goal_tolerance=0.04),
+              RunSettings(confirm_paths=True))
+
+    def kinds(t):
+        for action in [a for a in run.actions if isinstance(a, PlanFrom)]:
+            run.on_plan(run.loop.next_path(action.config))
+        out = [type(a) for a in run.actions]
+        run.actions.clear()
+        return out
+
+    run.start(0.0, q0)
+    assert Propose in kinds(0.0) and run.phase is Phase.AWAITING
+    assert run.decline(0.01) == ''
+    after_decline = kinds(0.01)
+    assert after_decline.index(Withdrawn) < after_decline.index(Propose)   # then the next one
+    assert run.confirm(0.02) == ''
+    sent = kinds(0.02)
+    assert Send in sent and Withdrawn not in sent
+    run.stop()
+    assert Withdrawn not in kinds(0.03)        # nothing awaited: nothing to withdraw
+    run = Run(ARM, Disentangler(ARM, Straight(), q0 + 0.5, goal_tolerance=0.04),
+              RunSettings(confirm_paths=True))
+    run.start(0.0, q0)
+    kinds(0.0)
+    run.stop()
+    assert Withdrawn in kinds(0.01) and run.proposed is None
 
 
 def test_the_interleavings_reach_every_kind_of_event():

@@ -86,6 +86,7 @@ from probdis_ros.run import (
     RunSettings,
     Send,
     StatusChanged,
+    Withdrawn,
 )
 from rcl_interfaces.msg import (
     FloatingPointRange,
@@ -1039,6 +1040,8 @@ class PlannerNode(Node):
             elif isinstance(action, Propose):
                 self._publish_markers(action.path)
                 self.get_logger().info(run.message)
+            elif isinstance(action, Withdrawn):
+                self._publish_markers(None)     # no longer drawn as if it were to run
             elif isinstance(action, Learned):
                 self.failure_pub.publish(String(data=json.dumps(action.event)))
                 self._save_map()
