@@ -435,8 +435,10 @@ class Run:
             self.bad_joint_state(problem)
             return
         self.measured = np.clip(np.asarray(config, dtype=float), self.arm.lower, self.arm.upper)
-        if effort is not None and self.phase.active:
-            self._note_torque(effort)
+        external = None if effort is None or not self.phase.active else \
+            external_torque(self.settings.detection, self.measured, effort)
+        if external is not None:
+            self._note_torque(external)
         self.measured_at = now
         self.measured_velocity = velocity
         self._recent.append((now, self.measured))
@@ -457,7 +459,7 @@ class Run:
         if self.detector is None:
             self._check_rest()
             return
-        verdict = self.detector.update(now, self.measured, effort)
+        verdict = self.detector.update(now, self.measured, external)
         if verdict is Verdict.MOVING:
             return
         detector, self.detector = self.detector, None
@@ -494,14 +496,11 @@ class Run:
             self.retreat_done_at = now
             self._send_pending()
 
-    def _note_torque(self, effort: np.ndarray) -> None:
+    def _note_torque(self, external: np.ndarray) -> None:
         """Keep the largest external-torque estimate per joint (effort minus gravity)."""
-        effort = np.asarray(effort, dtype=float)
-        if effort.shape != self.measured.shape or not np.all(np.isfinite(effort)):
-            return
-        external = np.abs(external_torque(self.settings.detection, self.measured, effort))
-        self.torque_peak = external if self.torque_peak is None else \
-            np.maximum(self.torque_peak, external)
+        pushed = np.abs(external)
+        self.torque_peak = pushed if self.torque_peak is None else \
+            np.maximum(self.torque_peak, pushed)
 
     def _check_rest(self) -> None:
         """Stop when the arm, at rest between commands, moves away on its own."""
@@ -586,10 +585,17 @@ class Run:
         return ''
 
     def decline(self, now: float) -> str:
-        """Drop the path awaiting confirmation and plan another; return why not ('' when done)."""
+        """
+        Drop the path awaiting confirmation and plan another; return why not ('' when done).
+
+        Never from stale joint states: the run stops instead, as on its tick.
+        """
         self._now = now
         if self.phase is not Phase.AWAITING:
             return f'no path awaits confirmation (the run is {self.phase.value})'
+        self.tick(now)
+        if not self.active:
+            return self.message
         self._replan_proposal(self._plan_origin(self._time()),
                               f'proposal {self.proposals} declined: planning another')
         return ''

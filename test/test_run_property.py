@@ -343,6 +343,15 @@ def test_a_confirm_after_the_arm_moved_sends_nothing_and_plans_again():
     plans(0.0)
     assert 'joint states stopped arriving' in run.confirm(0.5)
     assert run.phase is Phase.STOPPED
+    # and a decline from stale joint states stops it too, planning nothing from there
+    run = Run(ARM, Disentangler(ARM, Straight(), q0 + 0.5, goal_tolerance=0.04),
+              RunSettings(confirm_paths=True, state_timeout=0.1))
+    loop = run.loop
+    run.start(0.0, q0)
+    plans(0.0)
+    assert 'joint states stopped arriving' in run.decline(0.5)
+    assert run.phase is Phase.STOPPED and run.proposals == 1
+    assert not any(isinstance(a, PlanFrom) for a in run.actions)
 
 
 def test_a_path_declined_or_stopped_while_it_waits_is_withdrawn_from_view():

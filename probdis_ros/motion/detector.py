@@ -44,7 +44,8 @@ joint impedance follows its command with a lag) with where it is.  The L1 gap
   has not moved at all since the command began: nothing executes the command (an inactive
   controller), or something else holds the arm; that is no block to learn.  Where the joint
   states carry efforts, an arm whose external torque rose by ``HELD_TORQUE_RISE`` toward the
-  command meanwhile is held where it stood (the command runs and pulls it): blocked.  An arm that
+  command meanwhile, beyond its noise, is held where it stood (the command runs and pulls
+  it): blocked.  An arm that
   begins to move later than the command said (a large message delivered late, a busy
   controller) was started late by its controller: the command is judged from when it began
   (the trajectory's ``taken_at`` moves on by the delay), not taken for a block.
@@ -217,11 +218,21 @@ def gravity_model(load_mass: float, load_com: tuple[float, float, float]
     return GravityModel(load_mass=load_mass, load_com=load_com)
 
 
-def external_torque(settings: DetectorSettings, q: np.ndarray, effort: np.ndarray
-                    ) -> np.ndarray:
-    """Return the external-torque estimate [Nm]: measured efforts minus g(q) of arm and load."""
+def external_torque(settings: DetectorSettings, q: np.ndarray, effort: np.ndarray | None
+                    ) -> np.ndarray | None:
+    """
+    Return the external-torque estimate [Nm]: measured efforts minus g(q) of arm and load.
+
+    None where the efforts give none: absent, not one per joint of q, or not finite (a
+    driver's glitch must not read as a push, nor hide one as NaN would in comparisons).
+    """
+    if effort is None:
+        return None
+    effort = np.asarray(effort, dtype=float)
+    if effort.shape != np.shape(q) or not np.all(np.isfinite(effort)):
+        return None
     gravity = gravity_model(settings.load_mass, tuple(settings.load_com))
-    return np.asarray(effort, dtype=float) - gravity(q)
+    return effort - gravity(q)
 
 
 class SentCommand:
@@ -313,9 +324,14 @@ class BlockDetector:
         q, v, _ = self.path.sample(t - self.settings.motion_delay)
         return q, v
 
-    def update(self, now: float, measured: np.ndarray, effort: np.ndarray | None = None
+    def update(self, now: float, measured: np.ndarray, external: np.ndarray | None = None
                ) -> Verdict:
-        """Return the verdict after a new measurement (and measured torques) at now [s]."""
+        """
+        Return the verdict after a new measurement at now [s].
+
+        ``external``: the external-torque estimate at this state (:func:`external_torque`),
+        where the joint states carry efforts; its caller computes it once for every use.
+        """
         s = self.settings
         t = now - self.start_time
         measured = np.asarray(measured, dtype=float)
@@ -342,8 +358,8 @@ class BlockDetector:
         if self._pressed is not None:
             if not self._released(now, t, desired, measured, ended):
                 return Verdict.MOVING
-        if effort is not None and len(effort) == len(measured):
-            self.external_torque = external_torque(s, measured, effort)
+        if external is not None:
+            self.external_torque = external
             if t <= ENDS or not self._first_torques:
                 self._first_torques.append(self.external_torque)
             self._torques.append((now, self.external_torque))
@@ -481,14 +497,25 @@ class BlockDetector:
 
         The mean of the last ``ENDS`` seconds against the first's, on the joints the command
         pulls (beyond ``PRESS_TOLERANCE``), counted in the pull's direction only: the spring
-        of a held arm pulls toward the command; noise and an arm pushed by hand need not.
+        of a held arm pulls toward the command; noise and an arm pushed by hand need not.  A
+        joint's rise counts only beyond ``NOISE_SIGMAS`` standard errors of the two means
+        (the samples' spread about them): an idle arm's torque noise summed over seven
+        joints would otherwise pass ``HELD_TORQUE_RISE`` (1.5 Nm per sample: 8 % of idle
+        arms called held).
         """
         if not self._first_torques or not self._torques:
             return np.zeros(len(self._pull))
-        first = np.mean(self._first_torques, axis=0)
-        last = np.mean([torque for _, torque in self._torques], axis=0)
+        first = np.array(self._first_torques)
+        last = np.array([torque for _, torque in self._torques])
         pull = np.where(np.abs(self._pull) > PRESS_TOLERANCE, np.sign(self._pull), 0.0)
-        return np.maximum(0.0, pull * (last - first))
+        rise = pull * (last.mean(axis=0) - first.mean(axis=0))
+        n_first, n_last = len(first), len(last)
+        if n_first + n_last > 2:
+            spread = (n_first * first.var(axis=0) + n_last * last.var(axis=0)) / \
+                (n_first + n_last - 2)
+            error = np.sqrt(spread * (1.0 / n_first + 1.0 / n_last))
+            rise = np.where(rise > NOISE_SIGMAS * error, rise, 0.0)
+        return np.maximum(0.0, rise)
 
     def _blocked(self, reason: str) -> Verdict:
         self.reason = reason

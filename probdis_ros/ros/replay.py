@@ -339,15 +339,15 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
         result.configs.append(q)
         result.velocities.append(v)
         # the measured torques, where the driver sends them (the torque ceiling's estimate)
-        effort = values_by_name(msg.name, msg.effort, names)
-        if effort is not None:
-            pushed = np.abs(external_torque(settings, q, effort))
+        external = external_torque(settings, q, values_by_name(msg.name, msg.effort, names))
+        if external is not None:
+            pushed = np.abs(external)
             result.torque_peak = pushed if result.torque_peak is None else \
                 np.maximum(result.torque_peak, pushed)
         if detector is None:
             result.gaps.append(0.0)
             continue
-        verdict = detector.update(t, q, effort)
+        verdict = detector.update(t, q, external)
         result.gaps.append(detector.gap)
         if verdict is not Verdict.MOVING:
             pressed = verdict is Verdict.BLOCKED
