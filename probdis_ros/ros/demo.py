@@ -37,6 +37,7 @@ from probdis_ros.motion.jtc import DEFAULT_JTC_START
 from probdis_ros.physics import load_scene
 from probdis_ros.resources import data_file, scenario_path
 from probdis_ros.ros import MOCK_NODE
+from probdis_ros.ros.operator_prompt import OperatorPrompt
 from probdis_ros.sim.worlds import load_world
 
 #: The scene of ``probdis demo`` and ``make demo``.
@@ -141,28 +142,6 @@ def start_disentangling(client, planner: subprocess.Popen, mock: subprocess.Pope
         time.sleep(0.2)
 
 
-#: What the operator types, and the planner service it calls (an empty line: confirm).
-ANSWERS = {'': 'confirm_path', 'y': 'confirm_path', 'n': 'decline_path', 's': 'stop'}
-
-
-def ask_operator(read=None, say=None) -> str:
-    """
-    Ask on the terminal what to do with the path that awaits confirmation; return the service.
-
-    Enter or y sends it, n plans another, s stops the run (so does the end of the input).
-    """
-    read = read or sys.stdin.readline
-    say = say or (lambda text: print(text, end='', file=sys.stderr, flush=True))
-    while True:
-        say('demo: send this path? [Enter/y] send, [n] plan another, [s] stop: ')
-        line = read()
-        if not line:
-            return 'stop'
-        service = ANSWERS.get(line.strip().lower())
-        if service:
-            return service
-
-
 def world_of(world: str, engine: str) -> tuple[Path, str, np.ndarray, float]:
     """
     Return a world's file, name, goal and the reach of its grasped object about the flange.
@@ -191,7 +170,8 @@ def run_demo(world: str = DEFAULT_SCENE, timeout: float = 300.0, quiet: bool = F
     jtc_start: where the mock's controller starts a command, and the planner models it
     (``interpolate_from_desired_state``: 'desired'), checked by the planner against the mock.
     confirm: the planner's ``confirm_paths``; each path waits for an answer on standard input
-    (:func:`ask_operator`), whose time the timeout does not count.
+    (:class:`OperatorPrompt`), whose time the run's timeout does not count: each answer has a
+    timeout of its own, as long.
     """
     from probdis_ros.ros.client import PlannerClient
 
@@ -224,6 +204,14 @@ def run_demo(world: str = DEFAULT_SCENE, timeout: float = 300.0, quiet: bool = F
                 say(f'demo: start: {message}')
                 t0 = time.monotonic()           # the run's timeout counts from its start
                 asked_for = None
+                prompt = OperatorPrompt()
+
+                def still_waiting() -> bool:
+                    if planner.poll() is not None or mock.poll() is not None:
+                        return False
+                    latest = client.status(timeout=0.05, newer_than=status)
+                    return latest.get('state') == 'awaiting_confirmation' and \
+                        latest.get('proposal') == asked_for
                 while status.get('state') not in FINISHED:
                     if time.monotonic() - t0 > timeout:
                         raise TimeoutError(f'no outcome within {timeout:.0f} s')
@@ -239,10 +227,13 @@ def run_demo(world: str = DEFAULT_SCENE, timeout: float = 300.0, quiet: bool = F
                                 status.get('proposal') != asked_for:
                             asked_for = status.get('proposal')     # once per proposal
                             asked = time.monotonic()
-                            service = ask_operator()
+                            if quiet:           # no progress lines: say what it asks about
+                                prompt.say(f'demo: {status["message"]}\n')
+                            service = prompt.ask(still_waiting, patience=timeout)
                             t0 += time.monotonic() - asked
-                            _, message = client.call(service)
-                            say(f'demo: {service}: {message}')
+                            if service is not None:
+                                _, message = client.call(service)
+                                say(f'demo: {service}: {message}')
         finally:
             codes = (stop_process(planner), stop_process(mock))
     latencies = status.get('replan_latencies_s') or [0.0]
