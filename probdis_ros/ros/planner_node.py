@@ -171,7 +171,8 @@ PARAMETERS = {
         description='the 7 arm joints, in URDF order (matched by name in joint states)')),
     'goal': (UNSET_GOAL, ParameterDescriptor(
         description='goal configuration [rad], 7 values within the joint limits (no default: '
-                    '~/start refuses until it is set)')),
+                    '~/start refuses until it is set); read at ~/start: a run goes on to '
+                    'the goal it started with')),
     'velocity_scaling': (RUN.velocity_scaling, _float(
         'fraction of the URDF velocity limits (faster than 0.7, the arm in joint impedance '
         "overshoots them and the driver's command guard stops it)", 0.01,
