@@ -116,6 +116,30 @@ def test_latency_delays_and_noise_perturbs_the_reported_state_reproducibly():
     np.testing.assert_array_equal(noisy[-1].position, again[-1].position)
 
 
+def test_torque_noise_perturbs_the_reported_efforts_alone_from_a_stream_of_its_own():
+    goal = np.array([0.5, 0.3, 0.2, -1.0, 0.1, 0.7, 0.2])
+    runs = []
+    for settings in (RobotSettings(noise=0.001, seed=3),
+                     RobotSettings(noise=0.001, effort_noise=2.0, seed=3),
+                     RobotSettings(noise=0.001, effort_noise=2.0, seed=3)):
+        robot, _ = build_robot('physics', free_scene(), settings)
+        command_to(robot, goal, 0.5)
+        states = []
+        for _ in range(60):
+            robot.step()
+            states.append((robot.joint_state(), robot.engine.tau_measured.copy()))
+        runs.append(states)
+    plain, noisy, again = runs
+    # the positions (and their noise) as without it; the efforts about the measured torques
+    for (quiet, _), (loud, truth), (same, _) in zip(plain, noisy, again):
+        np.testing.assert_array_equal(loud.position, quiet.position)
+        np.testing.assert_array_equal(loud.effort, same.effort)
+    errors = np.array([state.effort - truth for state, truth in noisy])
+    assert 1.7 < errors.std() < 2.3 and abs(errors.mean()) < 0.3
+    with pytest.raises(ValueError, match='effort_noise'):
+        RobotSettings(effort_noise=-1.0)
+
+
 def test_an_unknown_engine_is_refused():
     with pytest.raises(ValueError, match='engine must be one of'):
         build_robot('teleport', 'demo_iiwa')

@@ -136,6 +136,10 @@ class KinematicEngine:
         self.time += duration
 
 
+#: The second word of the seed of the joint torques' noise stream (RobotSettings.seed first).
+EFFORT_STREAM = 1
+
+
 @dataclass
 class RobotSettings:
     """The command path and what the driver reports; every default in one place."""
@@ -143,6 +147,7 @@ class RobotSettings:
     period: float = 1.0 / CONTROLLER_RATE   # JTC and driver cycle [s]
     filter_tau: float = DRIVER_FILTER_TAU   # the driver's command filter [s]; 0: none
     noise: float = 0.0                      # std. dev. of reported positions [rad]
+    effort_noise: float = 0.0               # std. dev. of reported joint torques [Nm]
     latency: float = 0.0                    # reported joint states are this old [s]
     echo: bool = False                      # report the command sent, not the arm (open_loop)
     guard: bool = True                      # the driver's command guard stops it on a fault
@@ -155,7 +160,7 @@ class RobotSettings:
         """Refuse settings that cannot run."""
         if not self.period > 0:
             raise ValueError(f'period must be positive, got {self.period}')
-        for name in ('filter_tau', 'noise', 'latency', 'speed_monitor'):
+        for name in ('filter_tau', 'noise', 'effort_noise', 'latency', 'speed_monitor'):
             if not getattr(self, name) >= 0:
                 raise ValueError(f'{name} must be non-negative, got {getattr(self, name)}')
         if self.jtc_start not in JTC_STARTS:
@@ -182,6 +187,8 @@ class SimulatedRobot:
         self.settings = settings or RobotSettings()
         self.filter = FirstOrderFilter(self.settings.filter_tau, self.settings.period)
         self.rng = np.random.default_rng(self.settings.seed)
+        # the torques' noise from a stream of its own: the positions' stays as it was
+        self.effort_rng = np.random.default_rng((self.settings.seed, EFFORT_STREAM))
         from probdis_ros.model import iiwa_arm
         self._limits = iiwa_arm()
         self.limiter = CommandLimiter(self._limits.velocity_limits, self._limits.lower,
@@ -321,6 +328,10 @@ class SimulatedRobot:
             noisy = state.position + self.rng.normal(scale=self.settings.noise,
                                                      size=state.position.shape)
             state = JointStateSample(state.time, noisy, state.velocity, state.effort)
+        if self.settings.effort_noise > 0 and state.effort is not None:
+            noisy = state.effort + self.effort_rng.normal(scale=self.settings.effort_noise,
+                                                          size=state.effort.shape)
+            state = JointStateSample(state.time, state.position, state.velocity, noisy)
         self._reported.append(state)
         horizon = self.engine.time - self.settings.latency
         while len(self._reported) > 1 and self._reported[1].time <= horizon + 1e-12:
@@ -336,13 +347,13 @@ ENGINES = ('physics', 'kinematic')
 
 
 #: What a real setup adds to the ideal mock, by the mock node's parameter names: the
-#: driver's joint-state ``noise`` [rad] and ``latency`` [s] and KUKA's ``speed_monitor``
-#: [m/s] (RobotSettings), the load model's
+#: driver's joint-state ``noise`` [rad], ``effort_noise`` [Nm] and ``latency`` [s] and KUKA's
+#: ``speed_monitor`` [m/s] (RobotSettings), the load model's
 #: ``object_mass_error`` [kg], the motors' reflected inertia ``armature`` [kg m^2, every
 #: joint] and a grasp that gives, ``grasp_stiffness`` [Nm/rad]; and the robot application's
 #: joint impedance, ``stiffness`` [Nm/rad, every joint] and ``damping_ratio``, which a user
 #: sets on the real arm (PhysicsSettings; the physics arm only).
-FAULTS = ('noise', 'latency', 'speed_monitor', 'object_mass_error', 'armature',
+FAULTS = ('noise', 'effort_noise', 'latency', 'speed_monitor', 'object_mass_error', 'armature',
           'grasp_stiffness', 'stiffness', 'damping_ratio')
 #: The faults of the physics arm alone.
 PHYSICS_FAULTS = ('object_mass_error', 'armature', 'grasp_stiffness', 'stiffness',
@@ -363,7 +374,7 @@ def with_faults(faults: Mapping[str, float], settings: RobotSettings | None = No
         raise ValueError(f'no fault {unknown[0]!r} (one of {", ".join(FAULTS)})')
     robot = replace(settings or RobotSettings(),
                     **{k: float(v) for k, v in faults.items()
-                       if k in ('noise', 'latency', 'speed_monitor')})
+                       if k in ('noise', 'effort_noise', 'latency', 'speed_monitor')})
     physics = replace(PhysicsSettings(), **{k: float(v) for k, v in faults.items()
                                             if k in ('object_mass_error', 'grasp_stiffness',
                                                      'damping_ratio')})
