@@ -439,6 +439,7 @@ def test_the_physics_mock_takes_its_faults_from_its_parameters(ros):
         Parameter('engine', value='physics'), Parameter('scene', value='demo_hook'),
         Parameter('armature', value=0.3), Parameter('object_mass_error', value=0.1),
         Parameter('latency', value=0.02), Parameter('noise', value=0.001),
+        Parameter('effort_noise', value=0.5),
         Parameter('grasp_stiffness', value=20.0), Parameter('stiffness', value=400.0),
         Parameter('damping_ratio', value=1.0)]))
     robot = arm.robot
@@ -449,6 +450,7 @@ def test_the_physics_mock_takes_its_faults_from_its_parameters(ros):
     assert robot.engine.settings.damping_ratio == 1.0
     assert robot.engine.settings.object_mass_error == 0.1
     assert (robot.settings.latency, robot.settings.noise) == (0.02, 0.001)
+    assert robot.settings.effort_noise == 0.5
 
 
 def test_a_full_run_against_the_physics_mock_learns_and_persists_failures(ros, tmp_path):

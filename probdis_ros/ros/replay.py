@@ -127,7 +127,8 @@ class ReplayResult:
     velocities: list[np.ndarray | None] = field(default_factory=list)   # as reported
     problems: list[str] = field(default_factory=list)
     settings: DetectorSettings | None = None    # what the detector ran with
-    # per joint, the largest |effort - g(q)| (load data as recorded) [Nm]; None: no efforts
+    # per joint, the largest |effort - g(q)| (load data as recorded) until the run ended
+    # [Nm]; None: no efforts
     torque_peak: np.ndarray | None = None
 
     @property
@@ -338,9 +339,10 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
         result.times.append(t)
         result.configs.append(q)
         result.velocities.append(v)
-        # the measured torques, where the driver sends them (the torque ceiling's estimate)
+        # the measured torques, where the driver sends them (the torque ceiling's estimate);
+        # the peak, as the live run's, while the run drives the arm
         external = external_torque(settings, q, values_by_name(msg.name, msg.effort, names))
-        if external is not None:
+        if external is not None and not ended:
             pushed = np.abs(external)
             result.torque_peak = pushed if result.torque_peak is None else \
                 np.maximum(result.torque_peak, pushed)
