@@ -103,7 +103,7 @@ class MockIiwa(Node):
                                              'config/scenarios/'))
         p('rate', 100.0, _describe('controller and joint-state rate [Hz]', 10.0, 2000.0))
         p('noise', 0.0, _describe('std. dev. of joint-state noise [rad]', 0.0, 0.1))
-        p('effort_noise', 0.0, _describe('std. dev. of the joint states\' torque noise [Nm] '
+        p('effort_noise', 0.0, _describe('std. dev. of the torques in the joint states [Nm] '
                                          '(the physics arm)', 0.0, 50.0))
         p('latency', 0.0, _describe('delay of published joint states [s]', 0.0, 1.0))
         p('echo', False, _describe('report the commanded position (a driver in open loop)'))
