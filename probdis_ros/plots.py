@@ -158,22 +158,38 @@ def thin_3d_ticks(ax3) -> None:
 
 
 def plot_replay(result, out: str | Path, d_dist: float) -> Path:
-    """Draw a replay: the L1 joint gap over time with the blocks, and the flange path."""
+    """
+    Draw a replay: the L1 joint gap over time with the blocks, and the flange path.
+
+    Where the joint states carry efforts, a panel between them draws the external-torque
+    estimate per joint (efforts minus gravity): how hard the arm pressed, against its level
+    in free motion (the load data's error and the model's).
+    """
     import matplotlib
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
     from probdis_ros.model import iiwa_arm
 
-    fig = plt.figure(figsize=(11, 4.5))
-    ax = fig.add_subplot(1, 2, 1)
+    panels = 3 if result.torques else 2
+    fig = plt.figure(figsize=(5.5 * panels, 4.5))
+    ax = fig.add_subplot(1, panels, 1)
     ax.plot(result.times, result.gaps, lw=1, color='tab:blue', label='|desired - actual|_1')
     ax.axhline(d_dist, color='grey', ls='--', lw=1, label='d_dist')
-    for k, block in enumerate(result.blocks):
-        ax.axvline(block.t, color='tab:red', lw=1, label='block' if k == 0 else None)
+    _mark_blocks(ax, result.blocks)
     ax.set_xlabel('time since the bag started [s]')
     ax.set_ylabel('joint gap [rad]')
     ax.legend(fontsize=8)
-    ax3 = fig.add_subplot(1, 2, 2, projection='3d')
+    if result.torques:
+        axt = fig.add_subplot(1, panels, 2)
+        times = [t for t, _ in result.torques]
+        torques = np.array([tau for _, tau in result.torques])
+        for j in range(torques.shape[1]):
+            axt.plot(times, torques[:, j], lw=1, label=f'A{j + 1}')
+        _mark_blocks(axt, result.blocks)
+        axt.set_xlabel('time since the bag started [s]')
+        axt.set_ylabel('external torque: effort - gravity [Nm]')
+        axt.legend(fontsize=7, ncol=4)
+    ax3 = fig.add_subplot(1, panels, panels, projection='3d')
     if result.configs:
         xyz = iiwa_arm().fk(np.array(result.configs)).positions
         ax3.plot(xyz[:, 0], xyz[:, 1], xyz[:, 2], color='tab:blue', lw=1)
@@ -193,6 +209,12 @@ def plot_replay(result, out: str | Path, d_dist: float) -> Path:
     fig.savefig(out, dpi=110, bbox_inches='tight')
     plt.close(fig)
     return out
+
+
+def _mark_blocks(ax, blocks) -> None:
+    """Draw a vertical red line at each block's time."""
+    for k, block in enumerate(blocks):
+        ax.axvline(block.t, color='tab:red', lw=1, label='block' if k == 0 else None)
 
 
 def _grid(summary: dict):

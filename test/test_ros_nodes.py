@@ -28,6 +28,7 @@ import numpy as np
 from probdis_ros.model import FailureMap, iiwa_arm
 from probdis_ros.motion.jtc import TrajectoryCommand
 from probdis_ros.physics import load_scene
+from probdis_ros.plots import plot_replay
 from probdis_ros.resources import scenario_path
 from probdis_ros.ros import MOCK_NODE
 from probdis_ros.ros.messages import trajectory_msg
@@ -471,7 +472,13 @@ def test_a_full_run_against_the_physics_mock_learns_and_persists_failures(ros, t
     peak = np.array(status['peak_external_torque_nm'])
     assert 10.0 < peak.max() < 100.0
     wait_for(lambda: (Path(status['bag']) / 'metadata.yaml').exists(), 5, 'the bag')
-    np.testing.assert_allclose(replay(status['bag']).torque_peak, peak, atol=0.06)
+    replayed = replay(status['bag'])
+    np.testing.assert_allclose(replayed.torque_peak, peak, atol=0.06)
+    # its plot draws the estimate over time: every state's, the peak among them
+    drawn = np.abs([tau for _, tau in replayed.torques])
+    assert len(drawn) > 100 and np.all(drawn.max(axis=0) >= replayed.torque_peak - 1e-9)
+    picture = plot_replay(replayed, tmp_path / 'replay.png', 0.1)
+    assert picture.stat().st_size > 20_000
     # a finished run leaves its map beside its bag; the next run starts from an empty one
     beside = Path(status['bag']) / 'failure_map.json'
     wait_for(lambda: beside.exists(), 5, 'the map beside the bag')

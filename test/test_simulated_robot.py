@@ -131,7 +131,7 @@ def test_torque_noise_perturbs_the_reported_efforts_alone_from_a_stream_of_its_o
         runs.append(states)
     plain, noisy, again = runs
     # the positions (and their noise) as without it; the efforts about the measured torques
-    for (quiet, _), (loud, truth), (same, _) in zip(plain, noisy, again):
+    for (quiet, _), (loud, _), (same, _) in zip(plain, noisy, again):
         np.testing.assert_array_equal(loud.position, quiet.position)
         np.testing.assert_array_equal(loud.effort, same.effort)
     errors = np.array([state.effort - truth for state, truth in noisy])

@@ -130,6 +130,8 @@ class ReplayResult:
     # per joint, the largest |effort - g(q)| (load data as recorded) until the run ended
     # [Nm]; None: no efforts
     torque_peak: np.ndarray | None = None
+    # (time, effort - g(q)) at every joint state that carries efforts, for the plot
+    torques: list[tuple[float, np.ndarray]] = field(default_factory=list)
 
     @property
     def peak_gap(self) -> float:
@@ -342,6 +344,8 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
         # the measured torques, where the driver sends them (the torque ceiling's estimate);
         # the peak, as the live run's, while the run drives the arm
         external = external_torque(settings, q, values_by_name(msg.name, msg.effort, names))
+        if external is not None:
+            result.torques.append((t, external))
         if external is not None and not ended:
             pushed = np.abs(external)
             result.torque_peak = pushed if result.torque_peak is None else \
