@@ -1216,8 +1216,8 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument('--json', action='store_true',
                     help='print {"paths", "blocks": [{"t", "x", "retreat"}], "failures", '
                     '"success", "peak_gap_rad", "peak_point_speed_mps", '
-                    '"peak_external_torque_nm" (per joint, efforts minus gravity; null without '
-                    'efforts)}')
+                    '"peak_external_torque_nm" (per joint, efforts less gravity and '
+                    'dynamics; null without efforts)}')
     rp.add_argument('--plot', metavar='OUT.png', help='joint gaps and the flange path')
     rp.add_argument('--save-map', metavar='FILE', help='write the rebuilt failure map')
     rp.add_argument('--publish', action='store_true',

@@ -162,8 +162,8 @@ def plot_replay(result, out: str | Path, d_dist: float) -> Path:
     Draw a replay: the L1 joint gap over time with the blocks, and the flange path.
 
     Where the joint states carry efforts, a panel between them draws the external-torque
-    estimate per joint (efforts minus gravity): how hard the arm pressed, against its level
-    in free motion (the load data's error and the model's).
+    estimate per joint (efforts less gravity and dynamics): how hard the arm pressed,
+    against its level in free motion (the load data's error and the model's).
     """
     import matplotlib
     matplotlib.use('Agg')
@@ -187,7 +187,7 @@ def plot_replay(result, out: str | Path, d_dist: float) -> Path:
             axt.plot(times, torques[:, j], lw=1, label=f'A{j + 1}')
         _mark_blocks(axt, result.blocks)
         axt.set_xlabel('time since the bag started [s]')
-        axt.set_ylabel('external torque: effort - gravity [Nm]')
+        axt.set_ylabel('external torque estimate [Nm]')
         axt.legend(fontsize=7, ncol=4)
     ax3 = fig.add_subplot(1, panels, panels, projection='3d')
     if result.configs:

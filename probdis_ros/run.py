@@ -68,7 +68,7 @@ from probdis_ros.motion.cartesian_speed import CartesianSpeedLimit
 from probdis_ros.motion.detector import (
     BlockDetector,
     DetectorSettings,
-    external_torque,
+    ExternalTorqueObserver,
     slope_of,
     Verdict,
 )
@@ -383,6 +383,7 @@ class Run:
         # per joint, the largest |effort - g(q)| while the run drove the arm [Nm] (None: the
         # joint states carry no efforts)
         self.torque_peak: np.ndarray | None = None
+        self.torque_observer = ExternalTorqueObserver(self.settings.detection)
         self.outcome = ''
         self.message = 'ready'
         self._now = -np.inf
@@ -435,9 +436,10 @@ class Run:
             self.bad_joint_state(problem)
             return
         self.measured = np.clip(np.asarray(config, dtype=float), self.arm.lower, self.arm.upper)
-        external = None if effort is None or not self.phase.active else \
-            external_torque(self.settings.detection, self.measured, effort)
-        if external is not None:
+        # observed at every state with efforts (it follows the arm's motion), kept while active
+        external = None if effort is None else \
+            self.torque_observer.update(now, self.measured, velocity, effort)
+        if external is not None and self.phase.active:
             self._note_torque(external)
         self.measured_at = now
         self.measured_velocity = velocity
@@ -497,7 +499,7 @@ class Run:
             self._send_pending()
 
     def _note_torque(self, external: np.ndarray) -> None:
-        """Keep the largest external-torque estimate per joint (effort minus gravity)."""
+        """Keep the largest external-torque estimate per joint (ExternalTorqueObserver)."""
         pushed = np.abs(external)
         self.torque_peak = pushed if self.torque_peak is None else \
             np.maximum(self.torque_peak, pushed)

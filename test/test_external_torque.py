@@ -16,12 +16,18 @@
 """The external-torque estimate (efforts minus the gravity model) and its ceiling."""
 
 import numpy as np
-from probdis_ros.motion.detector import BlockDetector, DetectorSettings, external_torque, Verdict
+from probdis_ros.motion.detector import (
+    BlockDetector,
+    DetectorSettings,
+    external_torque,
+    ExternalTorqueObserver,
+    Verdict,
+)
 from probdis_ros.motion.gravity import GravityModel
 from probdis_ros.motion.jtc import JtcTrajectory, TrajectoryCommand
 from probdis_ros.physics import PhysicsIiwa
 import pytest
-from test_physics import BAR, bar_scene, blocked_run, FREE_SPACE, REST_CONFIGS
+from test_physics import BAR, bar_scene, blocked_run, FREE_SPACE, ramp, REST_CONFIGS, START
 
 HELD = np.array([0.0, 0.7, 0.0, -1.3, 0.0, 0.9, 0.0])
 
@@ -131,3 +137,38 @@ def test_torque_noise_on_every_pulled_joint_makes_no_idle_arm_held(spring, noise
             if found is not Verdict.MOVING:
                 break
         assert found is verdict, detector.reason
+
+
+def test_the_observer_leaves_out_what_accelerates_the_arm_and_finds_what_presses_on_it():
+    # a free move that starts and stops abruptly (a setpoint ramp, no profile): effort - g(q)
+    # reads the torques that accelerate the arm as external, the momentum observer does not
+    settings = DetectorSettings(load_mass=0.5, load_com=BAR['position'])
+    arm = PhysicsIiwa(bar_scene(box=False), FREE_SPACE)
+    q0 = np.array([0.2, 0.3, -0.4, -1.2, 0.3, 0.6, -0.5])
+    arm.reset(q0)
+    observer = ExternalTorqueObserver(settings)
+    static, observed = [], []
+
+    def record(a):
+        static.append(external_torque(settings, a.q, a.tau_measured))
+        observed.append(observer.update(a.time, a.q, a.qdot, a.tau_measured))
+
+    record(arm)
+    setpoint = ramp(arm, q0, q0 + 0.45, 1.5, record)
+    for _ in range(100):
+        arm.advance(setpoint, 0.01)
+        record(arm)
+    assert np.abs(static).max() > 5.0
+    assert np.abs(observed).max() < 0.2 * np.abs(static).max()
+    # pressed into the slab and held there: the contacts' torque, as effort - g(q) at rest
+    goal = START + np.array([0, 0.3, 0, 0, 0, 0, 0])
+    arm = PhysicsIiwa(bar_scene(goal=goal))
+    observer = ExternalTorqueObserver(settings)
+    observed.clear()
+    record(arm)
+    ramp(arm, START, goal, 1.0, record)
+    for _ in range(100):
+        arm.advance(goal, 0.01)
+        record(arm)
+    np.testing.assert_allclose(observed[-1], -arm.tau_external, atol=0.5)
+    assert abs(observed[-1][1]) > 5

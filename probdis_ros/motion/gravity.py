@@ -14,13 +14,14 @@
 
 
 """
-The arm's gravity torques, for an external-torque estimate from the joint states' efforts.
+The arm's rigid-body dynamics, for an external-torque estimate from the joint states' efforts.
 
 Where ``/lbr/joint_states`` carries the measured joint torques, the torque the scene exerts on
-the arm is about the measured torque minus what holds the arm and its load against gravity
-(inertial and Coriolis terms are small at the planner's speeds).  KUKA's controller makes
-the same estimate and needs the same load data.  Pinocchio computes ``g(q)`` from the URDF's
-inertials; the grasped object is a point mass at ``load_com`` in the flange frame.
+the arm is the measured torque less what holds the arm and its load against gravity and
+what accelerates them (:class:`probdis_ros.motion.detector.ExternalTorqueObserver`).  KUKA's
+controller makes the same estimate and needs the same load data.  Pinocchio computes
+``g(q)``, ``M(q)`` and ``C(q, v)`` from the URDF's inertials; the grasped object is a point
+mass at ``load_com`` in the flange frame.
 """
 
 from __future__ import annotations
@@ -58,3 +59,16 @@ class GravityModel:
         """Return g(q) [Nm] at a configuration (radians, the URDF's joint order)."""
         return np.array(self._pin.computeGeneralizedGravity(
             self.model, self.data, np.asarray(q, dtype=float)))
+
+    def momentum(self, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """
+        Return the generalised momentum M(q) v and the torque C(q, v)^T v - g(q) [Nm].
+
+        What a momentum observer needs: p' = tau + tau_ext + C(q, v)^T v - g(q).
+        """
+        pin = self._pin
+        q, v = np.asarray(q, dtype=float), np.asarray(v, dtype=float)
+        inertia = np.array(pin.crba(self.model, self.data, q))
+        inertia = np.triu(inertia) + np.triu(inertia, 1).T      # crba may fill one half
+        coriolis = np.array(pin.computeCoriolisMatrix(self.model, self.data, q, v))
+        return inertia @ v, coriolis.T @ v - self(q)

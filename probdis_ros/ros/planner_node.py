@@ -1071,7 +1071,7 @@ class PlannerNode(Node):
         peak = self.run.torque_peak
         pressed = '' if peak is None else (
             f' (peak external torque {peak.max():.1f} Nm at A{int(peak.argmax()) + 1}, '
-            f'efforts minus gravity)')
+            f'efforts less gravity and dynamics)')
         self.get_logger().info(f'run ended: {self.run.outcome}: {self.run.message}{pressed}')
         if self.recorder is not None:
             self.recorder_close_at = self._now() + 0.5

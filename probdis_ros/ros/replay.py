@@ -42,7 +42,7 @@ from probdis_ros.motion.cartesian_speed import point_speeds
 from probdis_ros.motion.detector import (
     BlockDetector,
     DetectorSettings,
-    external_torque,
+    ExternalTorqueObserver,
     Verdict,
 )
 from probdis_ros.motion.jtc import (
@@ -243,6 +243,7 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
          t0: float, overrides: dict) -> None:
     # the detector the live planner ran (its status carries it), unless the caller chose one
     settings = result.settings = given or detector_settings({}, overrides)
+    observer = ExternalTorqueObserver(settings)         # the live run's estimate
     states = StateCheck(names, arm.lower, arm.upper, arm.velocity_limits)
     measured = None
     measured_velocity = None
@@ -272,7 +273,8 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
             if given is None and isinstance(state.get('detection'), dict):
                 known = {f.name for f in fields(DetectorSettings)}
                 recorded = {k: v for k, v in state['detection'].items() if k in known}
-                settings = result.settings = detector_settings(recorded, overrides)
+                settings = result.settings = observer.settings = \
+                    detector_settings(recorded, overrides)
             if state.get('jtc_start') in JTC_STARTS:
                 jtc_start = state['jtc_start']
             starting = state.get('state') == 'planning' and state.get('paths') == 0
@@ -343,7 +345,8 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
         result.velocities.append(v)
         # the measured torques, where the driver sends them (the torque ceiling's estimate);
         # the peak, as the live run's, while the run drives the arm
-        external = external_torque(settings, q, values_by_name(msg.name, msg.effort, names))
+        effort = values_by_name(msg.name, msg.effort, names)
+        external = None if effort is None else observer.update(t, q, v, effort)
         if external is not None:
             result.torques.append((t, external))
         if external is not None and not ended:
