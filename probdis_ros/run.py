@@ -380,8 +380,8 @@ class Run:
         self.pressed = False                             # the last motion ended blocked
         self._recent: deque[tuple[float, np.ndarray]] = deque()     # (time, measured)
         self.latencies: list[float] = []
-        # per joint, the largest |effort - g(q)| while the run drove the arm [Nm] (None: the
-        # joint states carry no efforts)
+        # per joint, the largest external torque estimated (torque_observer) while the run
+        # drove the arm [Nm] (None: the joint states carry no efforts)
         self.torque_peak: np.ndarray | None = None
         self.torque_observer = ExternalTorqueObserver(self.settings.detection)
         self.outcome = ''

@@ -26,9 +26,10 @@ joint impedance follows its command with a lag) with where it is.  The L1 gap
   total or ``joint_gap_ceiling`` at one joint: with joint stiffness K the arm then presses
   with about K x gap, and a compliant arm whose unblocked joints keep moving may never stall
   before the trajectory ends (DESIGN.md "Facts: a physics-simulated iiwa");
-* **blocked** at once, where the joint states carry the measured torques and a gravity
-  model is given, when the external-torque estimate ``effort - g(q)`` exceeds
-  ``torque_ceiling`` at a joint (0: off; it needs the load data right, as KUKA's does);
+* **blocked** at once, where the joint states carry the measured torques, when the
+  external-torque estimate (:class:`ExternalTorqueObserver`: the efforts less the arm's
+  gravity and dynamics) exceeds ``torque_ceiling`` at a joint (0: off; it needs the load
+  data right, as KUKA's does);
 * **done** when the trajectory has ended and the gap to its last point is at most ``d_dist``;
 * **echo** when the measured positions have followed the moving command as the driver
   sends it for ``echo_time`` seconds: a driver that reports the position it commands (the
@@ -45,10 +46,10 @@ joint impedance follows its command with a lag) with where it is.  The L1 gap
   controller), or something else holds the arm; that is no block to learn.  Where the joint
   states carry efforts, an arm whose external torque rose by ``HELD_TORQUE_RISE`` toward the
   command meanwhile, beyond its noise, is held where it stood (the command runs and pulls
-  it): blocked.  An arm that
-  begins to move later than the command said (a large message delivered late, a busy
-  controller) was started late by its controller: the command is judged from when it began
-  (the trajectory's ``taken_at`` moves on by the delay), not taken for a block.
+  it): blocked.  An arm that begins to move later than the command said (a large message
+  delivered late, a busy controller) was started late by its controller: the command is
+  judged from when it began (the trajectory's ``taken_at`` moves on by the delay), not
+  taken for a block.
 
 A command that starts **pressed in** (``pressed_start``: JTC started it from its last
 command, ``interpolate_from_desired_state``, while the arm was held short of that command
@@ -232,13 +233,19 @@ def external_torque(settings: DetectorSettings, q: np.ndarray, effort: np.ndarra
     None where the efforts give none: absent, not one per joint of q, or not finite (a
     driver's glitch must not read as a push, nor hide one as NaN would in comparisons).
     """
+    effort = _per_joint(effort, q)
     if effort is None:
-        return None
-    effort = np.asarray(effort, dtype=float)
-    if effort.shape != np.shape(q) or not np.all(np.isfinite(effort)):
         return None
     gravity = gravity_model(settings.load_mass, tuple(settings.load_com))
     return effort - gravity(q)
+
+
+def _per_joint(values: np.ndarray | None, q: np.ndarray) -> np.ndarray | None:
+    """Return values as floats if finite and one per joint of q, else None."""
+    if values is None:
+        return None
+    values = np.asarray(values, dtype=float)
+    return values if values.shape == np.shape(q) and np.all(np.isfinite(values)) else None
 
 
 class ExternalTorqueObserver:
@@ -265,21 +272,21 @@ class ExternalTorqueObserver:
     def update(self, now: float, q: np.ndarray, velocity: np.ndarray | None,
                effort: np.ndarray | None) -> np.ndarray | None:
         """Return the estimate [Nm] after a joint state at now [s]; None without efforts."""
-        static = external_torque(self.settings, q, effort)
-        if static is None or velocity is None or np.shape(velocity) != np.shape(q) or \
-                not np.all(np.isfinite(velocity)):
+        velocity = _per_joint(velocity, q)
+        if velocity is None or _per_joint(effort, q) is None:
             self._last = None
-            self.estimate = static
-            return static
+            self.estimate = external_torque(self.settings, q, effort)
+            return self.estimate
         model = gravity_model(self.settings.load_mass, tuple(self.settings.load_com))
-        momentum, known = model.momentum(q, velocity)
+        momentum, coriolis, gravity = model.momentum(q, velocity)
         last, self._last = self._last, (now, momentum)
+        effort = np.asarray(effort, dtype=float)
         dt = None if last is None else now - last[0]
         if dt is None or not 0.0 < dt <= OBSERVER_RESTART or self.estimate is None:
-            self.estimate = static
-            return static
+            self.estimate = effort - gravity            # at rest, as external_torque()
+            return self.estimate
         # the external torque this step alone shows (sign as external_torque: -tau_ext)
-        seen = np.asarray(effort, dtype=float) + known - (momentum - last[1]) / dt
+        seen = effort + coriolis - gravity - (momentum - last[1]) / dt
         self.estimate = self.estimate + (1.0 - math.exp(-self.gain * dt)) * \
             (seen - self.estimate)
         return self.estimate
@@ -379,8 +386,9 @@ class BlockDetector:
         """
         Return the verdict after a new measurement at now [s].
 
-        ``external``: the external-torque estimate at this state (:func:`external_torque`),
-        where the joint states carry efforts; its caller computes it once for every use.
+        ``external``: the external-torque estimate at this state (the caller's
+        :class:`ExternalTorqueObserver`, or :func:`external_torque`), where the joint states
+        carry efforts; the caller computes it once for every use.
         """
         s = self.settings
         t = now - self.start_time

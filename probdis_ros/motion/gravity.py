@@ -60,9 +60,10 @@ class GravityModel:
         return np.array(self._pin.computeGeneralizedGravity(
             self.model, self.data, np.asarray(q, dtype=float)))
 
-    def momentum(self, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def momentum(self, q: np.ndarray, v: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """
-        Return the generalised momentum M(q) v and the torque C(q, v)^T v - g(q) [Nm].
+        Return the generalised momentum M(q) v, C(q, v)^T v and g(q) [Nm].
 
         What a momentum observer needs: p' = tau + tau_ext + C(q, v)^T v - g(q).
         """
@@ -71,4 +72,4 @@ class GravityModel:
         inertia = np.array(pin.crba(self.model, self.data, q))
         inertia = np.triu(inertia) + np.triu(inertia, 1).T      # crba may fill one half
         coriolis = np.array(pin.computeCoriolisMatrix(self.model, self.data, q, v))
-        return inertia @ v, coriolis.T @ v - self(q)
+        return inertia @ v, coriolis.T @ v, self(q)

@@ -127,10 +127,10 @@ class ReplayResult:
     velocities: list[np.ndarray | None] = field(default_factory=list)   # as reported
     problems: list[str] = field(default_factory=list)
     settings: DetectorSettings | None = None    # what the detector ran with
-    # per joint, the largest |effort - g(q)| (load data as recorded) until the run ended
-    # [Nm]; None: no efforts
+    # per joint, the largest external torque estimated (ExternalTorqueObserver, load data
+    # as recorded) until the run ended [Nm]; None: no efforts
     torque_peak: np.ndarray | None = None
-    # (time, effort - g(q)) at every joint state that carries efforts, for the plot
+    # (time, that estimate) at every joint state that carries efforts, for the plot
     torques: list[tuple[float, np.ndarray]] = field(default_factory=list)
 
     @property
