@@ -217,16 +217,18 @@ def test_demo_disentangles_through_two_processes_and_its_bag_replays_the_same(en
 
 
 def test_demo_with_confirm_asks_before_each_path_and_takes_the_answers(env, tmp_path):
-    # the operator declines the first path, then sends every path with Enter
+    # the operator declines the first path, then sends every path with Enter; in robot_waste,
+    # which the method gets out of for every planner seed (test_ros_nodes' confirm test)
     env['ROS_HOME'] = str(tmp_path)
-    result = subprocess.run([*probdis_command(), 'demo', '--engine', 'kinematic', '--confirm'],
+    result = subprocess.run([*probdis_command(), 'demo', '--engine', 'kinematic', '--confirm',
+                             '--scenario', 'robot_waste'],
                             env=env, capture_output=True, text=True, timeout=400,
                             input='n\n' + '\n' * 30)
     assert result.returncode == 0, result.stderr[-2000:]
     log = result.stderr
     assert 'demo: decline_path: proposal 1 declined: planning another' in log
     sent = log.count('demo: confirm_path: proposal ')
-    assert sent >= 2 and log.count('send this path?') == sent + 1
+    assert sent >= 1 and log.count('send this path?') == sent + 1
     assert f'disentangled after {sent} path(s)' in result.stdout
 
 

@@ -592,8 +592,13 @@ def test_a_clock_step_on_the_arm_stops_the_run_with_a_stop_jtc_takes(ros, tmp_pa
 
 
 def test_with_confirm_paths_each_path_waits_for_the_operator(ros, tmp_path):
+    # robot_waste (the demo's start and goal): the method gets out of it in 1-3 paths for
+    # every planner seed 0-11 (probdis sim --scenario robot_waste --seed S); the demo world
+    # gives up for some (2 of seeds 0-19), and the declined proposal and the timing change
+    # the run's draws: it gave up or stopped in 18 of 55 runs of this test on 2026-12-05
+    # (6 of 22 on be6d827, 12 of 33 on the commits after it)
     planner(ros, tmp_path, confirm_paths=True)
-    arm = mock(ros)
+    arm = mock(ros, scenario_path('robot_waste'))
     drawn = []          # per markers message: does it draw a path?
     ros.probe.create_subscription(
         MarkerArray, '/probdis_planner/markers',
@@ -637,11 +642,8 @@ def test_with_confirm_paths_each_path_waits_for_the_operator(ros, tmp_path):
         time.sleep(0.05)
         assert confirms <= 20
     status = ros.status
-    # whether this world's run gets out within max_paths depends on where the arm rests
-    # after each retreat (timing): gave up in 3 of 6 runs on 2026-12-05; what is checked is
-    # that every path tried was confirmed first
-    assert status['state'] in ('succeeded', 'gave_up'), status
-    assert confirms == status['paths'] >= 2 and status['proposed_path'] is None
+    assert status['state'] == 'succeeded', status
+    assert confirms == status['paths'] >= 1 and status['proposed_path'] is None
     assert status['peak_external_torque_nm'] is None     # the kinematic arm has no efforts
 
 
