@@ -461,7 +461,9 @@ class Run:
         if self.detector is None:
             self._check_rest()
             return
-        verdict = self.detector.update(now, self.measured, external)
+        verdict = self.detector.update(
+            now, self.measured, external,
+            None if external is None else self.torque_observer.static)
         if verdict is Verdict.MOVING:
             return
         detector, self.detector = self.detector, None

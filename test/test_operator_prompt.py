@@ -55,14 +55,48 @@ def test_no_answer_within_patience_stops_and_a_path_that_no_longer_waits_drops_t
 def test_at_a_terminal_lines_typed_before_the_question_are_dropped():
     # a double Enter on the last path must not send the next one unseen
     master, slave = pty.openpty()
+    answer = threading.Timer(0.5, lambda: os.write(master, b'n\n'))
     try:
         os.write(master, b'\n\n')
         time.sleep(0.2)                        # typed ahead, before the question
         prompt, _ = prompt_on(slave)
-        threading.Timer(0.5, lambda: os.write(master, b'n\n')).start()
+        answer.start()
         began = time.monotonic()
         assert prompt.ask(lambda: True, patience=5.0) == 'decline_path'
         assert time.monotonic() - began >= 0.4     # waited for the answer typed after it
     finally:
+        answer.cancel()
+        if answer.ident is not None:        # started
+            answer.join()
         os.close(master)
         os.close(slave)
+
+
+def test_input_of_no_answer_at_all_times_out_and_no_input_to_read_stops():
+    # a stream of lines that answer nothing (`yes no |`) is no answer: the patience runs out
+    read, write = os.pipe()
+    done = threading.Event()
+
+    def babble():
+        while not done.is_set():
+            os.write(write, b'maybe\n')
+            time.sleep(0.01)
+
+    writer = threading.Thread(target=babble)
+    writer.start()
+    try:
+        prompt, said = prompt_on(read)
+        began = time.monotonic()
+        assert prompt.ask(lambda: True, patience=0.5) == 'stop'
+        assert time.monotonic() - began < 2.0 and 'no answer within 0.5 s' in said[-1]
+    finally:
+        done.set()
+        writer.join()
+        os.close(read)
+        os.close(write)
+    # standard input closed (or absent: no file number to read)
+    closed = open(os.devnull)
+    closed.close()
+    said = []
+    assert OperatorPrompt(closed, said.append).ask(lambda: True, patience=5.0) == 'stop'
+    assert 'cannot read answers' in said[-1]

@@ -29,7 +29,8 @@ joint impedance follows its command with a lag) with where it is.  The L1 gap
 * **blocked** at once, where the joint states carry the measured torques, when the
   external-torque estimate (:class:`ExternalTorqueObserver`: the efforts less the arm's
   gravity and dynamics) exceeds ``torque_ceiling`` at a joint (0: off; it needs the load
-  data right, as KUKA's does);
+  data right, as KUKA's does); the observer lags a sudden contact by its time constant
+  (40 ms to 63 %), so the arm presses somewhat past the ceiling before it trips;
 * **done** when the trajectory has ended and the gap to its last point is at most ``d_dist``;
 * **echo** when the measured positions have followed the moving command as the driver
   sends it for ``echo_time`` seconds: a driver that reports the position it commands (the
@@ -103,8 +104,12 @@ HELD_TORQUE_RISE = 5.0
 #: [1/s] the external-torque observer follows a change at this rate (time constant 40 ms):
 #: quick beside a block's build-up, slow enough to smooth the efforts' noise
 OBSERVER_GAIN = 25.0
-#: [s] a longer pause between joint states starts the observer again from effort - g(q)
+#: [s] after a longer pause between joint states the observer keeps its estimate and takes
+#: the momentum afresh (a difference over the pause says little of the torque)
 OBSERVER_RESTART = 0.1
+#: The held test compares means of at least this many torque samples per window (fewer
+#: give no spread to judge their noise by: no held arm is then seen)
+HELD_SAMPLES = 2
 #: A controller that took a command later than this [s] after it was sent took it late.
 LATE_TAKE = 0.05
 #: An echo is looked for this far [s] either way of a state's time (the controller's phase
@@ -258,15 +263,25 @@ class ExternalTorqueObserver:
     robot controllers use) needs no acceleration: the momentum ``p = M(q) q'`` obeys
     ``p' = tau + tau_ext + C^T q' - g``, so ``p'`` less the known terms, low-passed at
     ``OBSERVER_GAIN``, is the external torque.  The estimate keeps external_torque()'s sign
-    and equals it at rest; a state without velocities or after a pause of more than
-    ``OBSERVER_RESTART`` starts it again from there.
+    and equals it at rest; it starts from there (at the first state, after one without
+    velocities, or should it stop being finite).  After a pause of more than
+    ``OBSERVER_RESTART`` it keeps its estimate and takes the momentum afresh: starting
+    again from effort - g(q) mid-motion would count the arm's inertia as a push.  A
+    state stamped no later than the last is skipped.
+
+    ``static``: effort - g(q) at the last state (None without efforts): exact for an arm
+    at rest, and its noise is the driver's, sample by sample, where the estimate's is
+    low-passed (the held test judges noise by the samples' spread).
     """
 
-    def __init__(self, settings: DetectorSettings, gain: float = 0.0) -> None:
-        """Observe with settings' load data; gain [1/s] (0: OBSERVER_GAIN)."""
+    def __init__(self, settings: DetectorSettings, gain: float = OBSERVER_GAIN) -> None:
+        """Observe with settings' load data at gain [1/s]."""
+        if not (math.isfinite(gain) and gain > 0):
+            raise ValueError(f'the observer gain must be positive, got {gain}')
         self.settings = settings
-        self.gain = gain or OBSERVER_GAIN
+        self.gain = gain
         self.estimate: np.ndarray | None = None
+        self.static: np.ndarray | None = None
         self._last: tuple[float, np.ndarray] | None = None     # time, momentum
 
     def update(self, now: float, q: np.ndarray, velocity: np.ndarray | None,
@@ -275,20 +290,26 @@ class ExternalTorqueObserver:
         velocity = _per_joint(velocity, q)
         if velocity is None or _per_joint(effort, q) is None:
             self._last = None
-            self.estimate = external_torque(self.settings, q, effort)
+            self.estimate = self.static = external_torque(self.settings, q, effort)
             return self.estimate
         model = gravity_model(self.settings.load_mass, tuple(self.settings.load_com))
         momentum, coriolis, gravity = model.momentum(q, velocity)
-        last, self._last = self._last, (now, momentum)
         effort = np.asarray(effort, dtype=float)
+        self.static = effort - gravity
+        last = self._last
         dt = None if last is None else now - last[0]
-        if dt is None or not 0.0 < dt <= OBSERVER_RESTART or self.estimate is None:
-            self.estimate = effort - gravity            # at rest, as external_torque()
+        if dt is not None and dt <= 0.0:
+            return self.estimate                        # not a later state: nothing to add
+        self._last = (now, momentum)
+        if dt is None or self.estimate is None:
+            self.estimate = self.static                 # as at rest: external_torque()
+            return self.estimate
+        if dt > OBSERVER_RESTART:
             return self.estimate
         # the external torque this step alone shows (sign as external_torque: -tau_ext)
         seen = effort + coriolis - gravity - (momentum - last[1]) / dt
-        self.estimate = self.estimate + (1.0 - math.exp(-self.gain * dt)) * \
-            (seen - self.estimate)
+        estimate = self.estimate + (1.0 - math.exp(-self.gain * dt)) * (seen - self.estimate)
+        self.estimate = estimate if np.all(np.isfinite(estimate)) else self.static
         return self.estimate
 
 
@@ -381,14 +402,17 @@ class BlockDetector:
         q, v, _ = self.path.sample(t - self.settings.motion_delay)
         return q, v
 
-    def update(self, now: float, measured: np.ndarray, external: np.ndarray | None = None
-               ) -> Verdict:
+    def update(self, now: float, measured: np.ndarray, external: np.ndarray | None = None,
+               static: np.ndarray | None = None) -> Verdict:
         """
         Return the verdict after a new measurement at now [s].
 
         ``external``: the external-torque estimate at this state (the caller's
         :class:`ExternalTorqueObserver`, or :func:`external_torque`), where the joint states
-        carry efforts; the caller computes it once for every use.
+        carry efforts; the caller computes it once for every use.  ``static``: effort - g(q)
+        at this state (the observer's ``static``; default ``external``), which the held test
+        takes: its arm has not moved, and its noise is judged by the samples' spread, which
+        the observer's low-pass would hide.
         """
         s = self.settings
         t = now - self.start_time
@@ -418,9 +442,10 @@ class BlockDetector:
                 return Verdict.MOVING
         if external is not None:
             self.external_torque = external
+            at_rest = external if static is None else static
             if t <= ENDS or not self._first_torques:
-                self._first_torques.append(self.external_torque)
-            self._torques.append((now, self.external_torque))
+                self._first_torques.append(at_rest)
+            self._torques.append((now, at_rest))
             while self._torques[0][0] < now - ENDS:
                 self._torques.popleft()
         if s.torque_ceiling and self.external_torque is not None:
@@ -559,21 +584,19 @@ class BlockDetector:
         joint's rise counts only beyond ``NOISE_SIGMAS`` standard errors of the two means
         (the samples' spread about them): an idle arm's torque noise summed over seven
         joints would otherwise pass ``HELD_TORQUE_RISE`` (1.5 Nm per sample: 8 % of idle
-        arms called held).
+        arms called held).  Fewer than ``HELD_SAMPLES`` samples in a window: zeros.
         """
-        if not self._first_torques or not self._torques:
+        if min(len(self._first_torques), len(self._torques)) < HELD_SAMPLES:
             return np.zeros(len(self._pull))
         first = np.array(self._first_torques)
         last = np.array([torque for _, torque in self._torques])
         pull = np.where(np.abs(self._pull) > PRESS_TOLERANCE, np.sign(self._pull), 0.0)
         rise = pull * (last.mean(axis=0) - first.mean(axis=0))
         n_first, n_last = len(first), len(last)
-        if n_first + n_last > 2:
-            spread = (n_first * first.var(axis=0) + n_last * last.var(axis=0)) / \
-                (n_first + n_last - 2)
-            error = np.sqrt(spread * (1.0 / n_first + 1.0 / n_last))
-            rise = np.where(rise > NOISE_SIGMAS * error, rise, 0.0)
-        return np.maximum(0.0, rise)
+        spread = (n_first * first.var(axis=0) + n_last * last.var(axis=0)) / \
+            (n_first + n_last - 2)
+        error = np.sqrt(spread * (1.0 / n_first + 1.0 / n_last))
+        return np.where(rise > NOISE_SIGMAS * error, rise, 0.0)
 
     def _blocked(self, reason: str) -> Verdict:
         self.reason = reason

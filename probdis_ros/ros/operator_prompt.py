@@ -58,21 +58,29 @@ class OperatorPrompt:
         Enter or y sends the path, n plans another, s stops the run; so does the end of the
         input, and no answer within patience [s] (said on the terminal).
         """
-        fd = self.stream.fileno()
-        if os.isatty(fd):
-            termios.tcflush(fd, termios.TCIFLUSH)
-            self._pending = b''
+        try:
+            fd = self.stream.fileno()
+            if os.isatty(fd):
+                termios.tcflush(fd, termios.TCIFLUSH)
+                self._pending = b''
+        except (AttributeError, ValueError, OSError) as error:    # no input to read
+            self.say(f'demo: cannot read answers from standard input ({error}): stopping '
+                     f'the run\n')
+            return 'stop'
         self.say(QUESTION)
         deadline = time.monotonic() + patience
         while True:
-            line = self._line(fd)
+            try:
+                line = self._line(fd)
+            except OSError as error:          # closed under us, or not readable
+                self.say(f'\ndemo: standard input failed ({error}): stopping the run\n')
+                return 'stop'
             if line is not None:
                 service = ANSWERS.get(line.strip().lower())
                 if service:
                     return service
                 self.say(QUESTION)
-                continue
-            if self._ended:
+            if self._ended and not self._pending:
                 return 'stop'
             if not still_waiting():
                 self.say('(no longer waits)\n')
