@@ -461,9 +461,8 @@ class Run:
         if self.detector is None:
             self._check_rest()
             return
-        verdict = self.detector.update(
-            now, self.measured, external,
-            None if external is None else self.torque_observer.static)
+        verdict = self.detector.update(now, self.measured, external,
+                                       self.torque_observer.static)
         if verdict is Verdict.MOVING:
             return
         detector, self.detector = self.detector, None

@@ -125,8 +125,8 @@ def test_torque_noise_on_every_pulled_joint_makes_no_idle_arm_held(spring, noise
     # all seven joints pulled: their noise summed over the joints passed HELD_TORQUE_RISE
     # in 23 of 100 idle arms at 2 Nm before a joint's rise had to stand out of its noise.
     # The efforts go through the observer as in a run: its low-passed estimate hides the
-    # noise's spread, so the held test takes effort - g(q) (12 of 25 idle arms called held
-    # at 2 Nm when it took the observer's estimate)
+    # noise's spread, so the held test takes effort - g(q) (7 of these 25 idle arms called
+    # held at 2 Nm when it took the observer's estimate)
     times = np.linspace(0.0, 1.0, 11)
     command = JtcTrajectory(TrajectoryCommand(times, HELD + np.outer(times, np.full(7, 0.3))),
                             HELD, np.zeros(7))

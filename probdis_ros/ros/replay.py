@@ -356,7 +356,7 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
         if detector is None:
             result.gaps.append(0.0)
             continue
-        verdict = detector.update(t, q, external, None if external is None else observer.static)
+        verdict = detector.update(t, q, external, observer.static)
         result.gaps.append(detector.gap)
         if verdict is not Verdict.MOVING:
             pressed = verdict is Verdict.BLOCKED
