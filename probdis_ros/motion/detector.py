@@ -50,7 +50,10 @@ joint impedance follows its command with a lag) with where it is.  The L1 gap
   it): blocked.  An arm that begins to move later than the command said (a large message
   delivered late, a busy controller) was started late by its controller: the command is
   judged from when it began (the trajectory's ``taken_at`` moves on by the delay), not
-  taken for a block.
+  taken for a block.  A command that need not move the arm (a retreat, a path from an arm
+  pressed against something) is waited for alike, within the same bounds, and is **blocked**
+  if the arm has not moved by then: a retreat taken late is no block (it was called one, and
+  the late retreat then moved the arm the run held at rest).
 
 A command that starts **pressed in** (``pressed_start``: JTC started it from its last
 command, ``interpolate_from_desired_state``, while the arm was held short of that command
@@ -375,7 +378,7 @@ class BlockDetector:
                 self._pressed = sign
         self.released_at: float | None = None
         self.expect_motion = expect_motion      # a block without any motion: not executed
-        self.started = not expect_motion        # the arm has been seen to move
+        self.started = False                    # the arm has been seen to move
         self.late = 0.0                         # how late the controller took the command [s]
         self._first: list[np.ndarray] = []     # the samples of the first ENDS seconds
         self.settings = settings or DetectorSettings()
@@ -561,6 +564,9 @@ class BlockDetector:
                 (not s.joint_gap_ceiling or self.joint_gaps.max() <= s.joint_gap_ceiling)
             if self._history[-1][0] - self.start_time < START_WAIT and within:
                 return Verdict.MOVING             # the controller may take it late
+            if not self.expect_motion:      # a retreat, or a path from a pressed arm
+                return self._blocked(f'{reason}; the arm has not moved since the command '
+                                     f'began')
             moved, _ = self.moved()
             still = (f'the arm has not moved since the command began ({moved:.3f} rad L1 in '
                      f'{self._history[-1][0] - self.start_time:.2f} s, {reason})')
