@@ -1343,7 +1343,8 @@ def build_parser() -> argparse.ArgumentParser:
                        '(repeatable; README "Parameters")')
     robot.add_argument('--fault', action='append', metavar='NAME=VALUE',
                        help="a fault of the mock in every run, by its node parameter's name: "
-                       'noise [rad], effort_noise [Nm], latency [s], speed_monitor [m/s], '
+                       'noise [rad], effort_noise [Nm], latency [s], command_latency [s], '
+                       'speed_monitor [m/s], '
                        'object_mass_error [kg], '
                        'armature [kg m^2], grasp_stiffness [Nm/rad]; or the robot '
                        "application's joint impedance: stiffness [Nm/rad], damping_ratio "

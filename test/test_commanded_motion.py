@@ -164,6 +164,23 @@ def test_a_command_the_controller_takes_late_is_judged_from_when_it_began(expect
     assert abs(detector.late - late) < 0.05 and abs(jtc.taken_at - late) < 0.05
 
 
+def test_a_short_path_taken_late_is_done_where_the_arm_comes_to_rest_not_on_its_way():
+    # 0.06 rad from the arm, taken 0.25 s late: its gap never passes d_dist, so without the
+    # rest the path was done with the arm short of its end (the run planned from there, and
+    # on the physics mock at a command latency of 0.25 s went back and forth 20 times)
+    settings = DetectorSettings()
+    end = Q0 + np.array([0.0, 0.05, 0.0, 0.0, 0.0, 0.0, 0.01])
+    jtc = trajectory(Q0, end)
+    late = 0.25
+
+    def arm(t):
+        return jtc.sample(t - late - settings.motion_delay)[0]
+    detector = BlockDetector(jtc, 0.0, settings, expect_motion=True)
+    when, seen = judge(detector, arm, jtc.duration + late + 2.0)
+    assert seen is Verdict.DONE
+    assert np.abs(arm(when) - end).sum() < 0.005
+
+
 @pytest.mark.parametrize('scaling', [0.2, 0.7])
 def test_a_retreat_held_from_its_start_is_blocked_once_a_gap_passes_its_ceiling(scaling):
     # waited for as a late take, then blocked (not "not executed": an arm pressed from two

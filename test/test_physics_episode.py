@@ -40,6 +40,17 @@ def test_an_offline_physics_episode_learns_from_a_block_and_is_reproducible():
     assert first.sim_time_s > 1.0      # (its speed: `probdis bench physics`, not a test)
 
 
+def test_commands_that_reach_the_controller_late_still_get_the_arm_out():
+    # every message 0.25 s on its way (a loaded machine or network): paths and retreats are
+    # taken late; a path done before the arm got to its end sent the run back and forth
+    # (this seed: 18 paths, 13 of them ended short of the goal without a block)
+    from probdis_ros.physics.simulated_robot import RobotSettings
+
+    late = run_physics_episode('demo_hook', 'informed', seed=0, max_paths=6,
+                               robot_settings=RobotSettings(command_latency=0.25))
+    assert late.success and late.paths <= 3, late.message
+
+
 def test_a_driver_stopped_by_the_speed_monitoring_is_restarted_and_the_run_resumes():
     # KUKA's speed monitoring at 0.1 m/s stops the arm on the demo's first path, before it
     # meets the hook (its points reach about 0.6 m/s at scaling 0.2): every start is stopped

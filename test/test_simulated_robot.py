@@ -116,6 +116,33 @@ def test_latency_delays_and_noise_perturbs_the_reported_state_reproducibly():
     np.testing.assert_array_equal(noisy[-1].position, again[-1].position)
 
 
+def test_a_command_latency_holds_each_message_back_and_the_newest_one_replaces_the_rest():
+    goal = np.array([0.3, 0.2, 0.0, -1.1, 0.0, 0.6, 0.0])
+    runs = {}
+    for latency in (0.0, 0.2):
+        robot, _ = build_robot('kinematic', 'demo_iiwa', RobotSettings(command_latency=latency))
+        start = robot.engine.q.copy()
+        command_to(robot, goal, 1.0)
+        moved_at = None
+        while robot.time < 0.5:
+            robot.step()
+            if moved_at is None and np.abs(robot.engine.q - start).sum() > 1e-9:
+                moved_at = robot.time
+        runs[latency] = moved_at
+    # JTC takes it at its first update after it arrives: 0.2 s (20 periods) later
+    assert runs[0.0] == pytest.approx(0.01) and runs[0.2] == pytest.approx(0.21)
+    # two messages arriving in one period: JTC runs the newer (a new one replaces the last)
+    robot, _ = build_robot('kinematic', 'demo_iiwa', RobotSettings(command_latency=0.1))
+    start = robot.engine.q.copy()
+    command_to(robot, goal, 1.0)
+    command_to(robot, start, 1.0)         # hold where it is
+    while robot.time < 0.5:
+        robot.step()
+    assert np.abs(robot.engine.q - start).sum() < 1e-9
+    with pytest.raises(ValueError, match='command_latency'):
+        RobotSettings(command_latency=-0.1)
+
+
 def test_torque_noise_perturbs_the_reported_efforts_alone_from_a_stream_of_its_own():
     goal = np.array([0.5, 0.3, 0.2, -1.0, 0.1, 0.7, 0.2])
     runs = []

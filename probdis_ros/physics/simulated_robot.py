@@ -43,6 +43,7 @@ setup shows: Gaussian noise, a latency, and the "echo" of a driver with ``open_l
 effect, whose joint states are the position it commands (JTC's command after the driver's
 filter, as the lbr stack's ``set_state_open_loop`` copies it) instead of the measured one,
 with velocities by differences of those positions and the measured torques as they are.
+Commands can reach JTC late (``command_latency``), as on a loaded machine or network.
 No rclpy: the mock node and ``probdis sim --engine physics`` both drive this class.
 """
 
@@ -149,6 +150,7 @@ class RobotSettings:
     noise: float = 0.0                      # std. dev. of reported positions [rad]
     effort_noise: float = 0.0               # std. dev. of reported joint torques [Nm]
     latency: float = 0.0                    # reported joint states are this old [s]
+    command_latency: float = 0.0            # a command reaches JTC this long after it is sent [s]
     echo: bool = False                      # report the command sent, not the arm (open_loop)
     guard: bool = True                      # the driver's command guard stops it on a fault
     speed_monitor: float = 0.0              # KUKA's Cartesian speed monitoring [m/s]; 0: off
@@ -160,7 +162,8 @@ class RobotSettings:
         """Refuse settings that cannot run."""
         if not self.period > 0:
             raise ValueError(f'period must be positive, got {self.period}')
-        for name in ('filter_tau', 'noise', 'effort_noise', 'latency', 'speed_monitor'):
+        for name in ('filter_tau', 'noise', 'effort_noise', 'latency', 'command_latency',
+                     'speed_monitor'):
             if not getattr(self, name) >= 0:
                 raise ValueError(f'{name} must be non-negative, got {getattr(self, name)}')
         if self.jtc_start not in JTC_STARTS:
@@ -214,6 +217,8 @@ class SimulatedRobot:
         self.stopped: str | None = None       # why the driver's command guard stopped it
         self._stop_torque = np.zeros(len(q))  # the contacts' torques then [Nm]
         self._reported: deque[JointStateSample] = deque()
+        # (when JTC gets it, the command) of messages still on their way (command_latency)
+        self._in_flight: deque[tuple[float, TrajectoryCommand]] = deque()
         self._report()
 
     def restart(self) -> None:
@@ -251,14 +256,16 @@ class SimulatedRobot:
         return self.engine.time
 
     def command(self, command: TrajectoryCommand) -> None:
-        """Hand JTC a new trajectory message; it takes it at its next update."""
-        self.controller.receive(command)
+        """Send JTC a trajectory message; it takes it at its first update after it arrives."""
+        self._in_flight.append((self.engine.time + self.settings.command_latency, command))
 
     def step(self) -> None:
         """Run one controller period: JTC update, joint limiter, driver filter, the arm moves."""
         if self.stopped is not None:        # the driver is down: the arm holds, unreported
             self.engine.advance(self._held, self.settings.period)
             return
+        while self._in_flight and self._in_flight[0][0] <= self.engine.time + 1e-12:
+            self.controller.receive(self._in_flight.popleft()[1])   # the newest replaces
         state = self._state()       # JTC starts a new trajectory from the reported state
         # (or, jtc_start 'desired', from its last command)
         previous = self.commanded
@@ -347,14 +354,15 @@ ENGINES = ('physics', 'kinematic')
 
 
 #: What a real setup adds to the ideal mock, by the mock node's parameter names: the
-#: driver's joint-state ``noise`` [rad], ``effort_noise`` [Nm] and ``latency`` [s] and KUKA's
-#: ``speed_monitor`` [m/s] (RobotSettings), the load model's
+#: driver's joint-state ``noise`` [rad], ``effort_noise`` [Nm] and ``latency`` [s], the
+#: delivery of its commands, ``command_latency`` [s] (a loaded machine or network, a large
+#: message), and KUKA's ``speed_monitor`` [m/s] (RobotSettings), the load model's
 #: ``object_mass_error`` [kg], the motors' reflected inertia ``armature`` [kg m^2, every
 #: joint] and a grasp that gives, ``grasp_stiffness`` [Nm/rad]; and the robot application's
 #: joint impedance, ``stiffness`` [Nm/rad, every joint] and ``damping_ratio``, which a user
 #: sets on the real arm (PhysicsSettings; the physics arm only).
-FAULTS = ('noise', 'effort_noise', 'latency', 'speed_monitor', 'object_mass_error', 'armature',
-          'grasp_stiffness', 'stiffness', 'damping_ratio')
+FAULTS = ('noise', 'effort_noise', 'latency', 'command_latency', 'speed_monitor',
+          'object_mass_error', 'armature', 'grasp_stiffness', 'stiffness', 'damping_ratio')
 #: The faults of the physics arm alone.
 PHYSICS_FAULTS = ('object_mass_error', 'armature', 'grasp_stiffness', 'stiffness',
                   'damping_ratio')
@@ -374,7 +382,8 @@ def with_faults(faults: Mapping[str, float], settings: RobotSettings | None = No
         raise ValueError(f'no fault {unknown[0]!r} (one of {", ".join(FAULTS)})')
     robot = replace(settings or RobotSettings(),
                     **{k: float(v) for k, v in faults.items()
-                       if k in ('noise', 'effort_noise', 'latency', 'speed_monitor')})
+                       if k in ('noise', 'effort_noise', 'latency', 'command_latency',
+                                'speed_monitor')})
     physics = replace(PhysicsSettings(), **{k: float(v) for k, v in faults.items()
                                             if k in ('object_mass_error', 'grasp_stiffness',
                                                      'damping_ratio')})

@@ -31,7 +31,8 @@ chooses the arm:
 With ``sim_time`` the mock runs on simulated time: it publishes ``/clock`` and runs
 ``real_time_factor`` times faster than the wall clock (0: as fast as it can), so a planner
 started with ``use_sim_time:=true`` can be tested many times faster than real time.
-Optional faults: joint-state noise, latency, the "echo" of a driver in open loop, and of
+Optional faults: joint-state noise, latency, commands delivered late (``command_latency``),
+the "echo" of a driver in open loop, and of
 the physics arm a load-model error, the motors' reflected inertia (``armature``) and a
 grasp that gives (``grasp_stiffness``); and the robot application's joint impedance
 (``stiffness``, ``damping_ratio``), which a user sets on the real arm.  When the driver's
@@ -106,6 +107,8 @@ class MockIiwa(Node):
         p('effort_noise', 0.0, _describe('std. dev. of the torques in the joint states [Nm] '
                                          '(the physics arm)', 0.0, 50.0))
         p('latency', 0.0, _describe('delay of published joint states [s]', 0.0, 1.0))
+        p('command_latency', 0.0, _describe('delay of each trajectory message before JTC '
+                                            'takes it [s]', 0.0, 1.0))
         p('echo', False, _describe('report the commanded position (a driver in open loop)'))
         p('speed_monitor', 0.0, _describe(
             "KUKA's Cartesian speed monitoring [m/s]: a point of the arm (URDF collision "
