@@ -385,6 +385,21 @@ def test_nan_joint_states_are_reported_and_skipped(tmp_path):
     assert any('non-finite' in p for p in result.problems)
 
 
+def test_states_a_hair_past_a_limit_are_replayed_clipped_as_the_live_run_takes_them(tmp_path):
+    # the state check lets positions up to LIMIT_TOLERANCE past a limit through, clipped:
+    # the replay's detector and observer see them as the live run's do (a review thought
+    # the replay's were not clipped; the shared state check clips them for both)
+    messages, _, _ = simulated_run()
+    upper = iiwa_arm().upper[1]
+    past = [(stamp, topic, dict(fields, position=[fields['position'][0], upper + 0.001,
+                                                 *fields['position'][2:]]))
+            if topic == JS else (stamp, topic, fields) for stamp, topic, fields in messages]
+    write_bag(tmp_path / 'bag', past, 9, StoragePlugin.MCAP)
+    result = replay(tmp_path / 'bag')
+    assert not any('refused' in p for p in result.problems)
+    assert max(q[1] for q in result.configs) == upper
+
+
 def test_a_state_with_some_velocities_nan_is_refused_as_the_live_planner_refuses_it(tmp_path):
     # a glitch: the live gate refuses it (a stop would take the arm for at rest); the replay
     # passed the gate no velocities and took it
