@@ -181,6 +181,17 @@ def test_a_short_path_taken_late_is_done_where_the_arm_comes_to_rest_not_on_its_
     assert np.abs(arm(when) - end).sum() < 0.005
 
 
+def test_a_short_path_nothing_runs_is_not_executed_after_the_wait_for_a_late_controller():
+    # its gap never passes d_dist, so no gap test would say so: it was done, and the run
+    # planned again from where the arm stood, path after path
+    settings = DetectorSettings()
+    jtc = trajectory(Q0, Q0 + np.array([0.0, 0.05, 0.0, 0.0, 0.0, 0.0, 0.01]))
+    detector = BlockDetector(jtc, 0.0, settings, expect_motion=True)
+    when, seen = judge(detector, lambda t: Q0, START_WAIT + 1.0)
+    assert seen is Verdict.NOT_EXECUTED and START_WAIT <= when < START_WAIT + 0.05
+    assert 'has not moved since the command began' in detector.reason
+
+
 @pytest.mark.parametrize('scaling', [0.2, 0.7])
 def test_a_retreat_held_from_its_start_is_blocked_once_a_gap_passes_its_ceiling(scaling):
     # waited for as a late take, then blocked (not "not executed": an arm pressed from two

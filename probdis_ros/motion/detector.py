@@ -463,8 +463,10 @@ class BlockDetector:
                                      f'{abs(self.external_torque[joint]):.1f} Nm above '
                                      f'{s.torque_ceiling:.1f} Nm')
         if ended and self.gap <= s.d_dist:
-            if self._awaits_start():
-                return Verdict.MOVING   # a short path the controller may still take late
+            if self._should_move():
+                if self._history[-1][0] - self.start_time < START_WAIT:
+                    return Verdict.MOVING       # a short path the controller may take late
+                return self._gap_block(f'gap {self.gap:.3f} rad, within d_dist, at its end')
             if self._settled() or t >= self.path.duration + s.motion_delay + s.settle_time:
                 return Verdict.DONE
             return Verdict.MOVING       # on its way still: the run takes where it comes to rest
@@ -489,15 +491,14 @@ class BlockDetector:
                                        f'rad in {times[-1] - times[0]:.2f} s)')
         return Verdict.MOVING
 
-    def _awaits_start(self) -> bool:
+    def _should_move(self) -> bool:
         """
-        Tell whether a path that should visibly move the arm has not yet, within START_WAIT.
+        Tell whether a path that should visibly move the arm has not moved it yet.
 
         Its gap may never pass ``d_dist`` (a short path), so nothing else would wait for a
-        controller that takes it late.
+        controller that takes it late, or tell that nothing runs it.
         """
-        if self.started or not self.expect_motion or \
-                self._history[-1][0] - self.start_time >= START_WAIT:
+        if self.started or not self.expect_motion:
             return False
         first = np.mean(self._first, axis=0)
         _, allowance = self.moved()
