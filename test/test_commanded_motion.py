@@ -33,6 +33,7 @@ from probdis_ros.motion.detector import (
     DetectorSettings,
     motion_over,
     MotionWatch,
+    RETREAT_START_WAIT,
     START_WAIT,
     Verdict,
 )
@@ -192,18 +193,22 @@ def test_a_short_path_nothing_runs_is_not_executed_after_the_wait_for_a_late_con
     assert 'has not moved since the command began' in detector.reason
 
 
-@pytest.mark.parametrize('scaling', [0.2, 0.7])
-def test_a_retreat_held_from_its_start_is_blocked_once_a_gap_passes_its_ceiling(scaling):
+@pytest.mark.parametrize('scaling, length', [(0.2, 1.0), (0.7, 1.0), (0.2, 0.1)])
+def test_a_retreat_held_from_its_start_is_blocked_at_its_ceiling_or_after_a_short_wait(
+        scaling, length):
     # waited for as a late take, then blocked (not "not executed": an arm pressed from two
-    # sides after a block is something to learn), pressing no harder than a blocked path
+    # sides after a block is something to learn), pressing no harder than a blocked path,
+    # and for RETREAT_START_WAIT at most where its gap stays under the ceilings (a short
+    # retreat: it was pressed until START_WAIT, 2 s)
     settings = DetectorSettings()
-    motion = from_state(Q0, None, np.array([Q0, Q1]),
+    end = Q0 + length * (Q1 - Q0)
+    motion = from_state(Q0, None, np.array([Q0, end]),
                         RunSettings(velocity_scaling=scaling).limits(ARM))
     jtc = JtcTrajectory(motion.command, Q0, None, 0.0)
     detector = BlockDetector(jtc, 0.0, settings)
     when, seen = judge(detector, lambda t: Q0, jtc.duration + 1.0)
-    assert seen is Verdict.BLOCKED and when < START_WAIT
-    assert 'the arm has not moved since the command began' in detector.reason
+    assert seen is Verdict.BLOCKED and when <= RETREAT_START_WAIT + 0.02
+    assert 'the arm has not moved in' in detector.reason
     allowance = settings.speed_allowance * np.abs(jtc.sample(when)[1])
     assert detector.gap <= settings.gap_ceiling + allowance.sum() + 0.02
 
@@ -258,6 +263,23 @@ def test_a_pressed_in_retreat_that_is_blocked_behind_is_seen_once_it_has_come_ba
                        jtc.duration + 2.0)
     assert seen is Verdict.BLOCKED and detector.released_at is not None
     assert when < jtc.duration
+
+
+def test_a_pressed_in_retreat_blocked_after_its_release_presses_no_further_than_the_ceilings():
+    # a command that starts pressed in is not waited for as one taken late: it starts the
+    # press gap away from the arm, which read as a delay (0.28 s at scaling 0.7) that kept
+    # the gap tests off while the arm pressed to 1.27 rad L1 (a review, 2026-12-05)
+    settings = DetectorSettings()
+    jtc, held = pressed_retreat()
+    free = held_until_back(jtc, settings, held)
+    back = next(t for t in np.arange(0.0, jtc.duration, 0.001)
+                if np.abs(free(t) - held).sum() > 1e-6)
+    detector = BlockDetector(jtc, 0.0, settings, pressed_start=(jtc.before[0], held))
+    when, seen = judge(detector, lambda t: free(min(t, back + 0.3)), jtc.duration + 2.0)
+    assert seen is Verdict.BLOCKED and detector.late == 0.0
+    allowance = settings.speed_allowance * np.abs(jtc.sample(when)[1])
+    assert detector.gap <= settings.gap_ceiling + allowance.sum() + 0.05
+    assert detector.joint_gaps.max() <= settings.joint_gap_ceiling + allowance.max() + 0.05
 
 
 # ------------------------------------------------------------------ the run learns nothing

@@ -52,9 +52,12 @@ joint impedance follows its command with a lag) with where it is.  The L1 gap
   delivered late, a busy controller) was started late by its controller: the command is
   judged from when it began (the trajectory's ``taken_at`` moves on by the delay), not
   taken for a block.  A command that need not move the arm (a retreat, a path from an arm
-  pressed against something) is waited for alike, within the same bounds, and is **blocked**
-  if the arm has not moved by then: a retreat taken late is no block (it was called one, and
-  the late retreat then moved the arm the run held at rest).
+  pressed against something) is waited for alike, but for ``RETREAT_START_WAIT`` at most and
+  not once its external torque shows it held, and is **blocked** if the arm has not moved
+  by then: a retreat taken late is no block (it was called one, and the late retreat then
+  moved the arm the run held at rest).  A command that starts pressed in is not waited for.
+  A short path whose gap never passes ``d_dist`` is not executed if it has not moved the
+  arm by ``START_WAIT``.
 
 A command that starts **pressed in** (``pressed_start``: JTC started it from its last
 command, ``interpolate_from_desired_state``, while the arm was held short of that command
@@ -99,6 +102,10 @@ ENDS = 0.05
 #: (or sooner, once a gap passes its ceiling: an arm held from rest presses no harder while
 #: the controller may still be taking the command late than a blocked one does).
 START_WAIT = 2.0
+#: A retreat (or a path from an arm pressed against something), which need not move the
+#: arm, is waited for this long [s] at most: an arm pressed from two sides after a block
+#: is pressed the longer the longer it is waited for (a stall is seen after stall_time).
+RETREAT_START_WAIT = 0.5
 #: [Nm, L1 over the joints] an arm that has not moved while its external-torque estimate rose
 #: this much toward the command since the command began (means over ENDS) is held by
 #: something: JTC runs the command and the impedance's spring pulls the arm toward it
@@ -119,6 +126,8 @@ LATE_TAKE = 0.05
 #: An arm that moved no more than noise and ``stall_motion`` over this long [s] has come to
 #: rest: a command is done once its end is reached and the arm rests there.
 SETTLE_WINDOW = 0.1
+#: ... judged on at least this many states (fewer: not at rest)
+SETTLE_SAMPLES = 4
 #: An echo is looked for this far [s] either way of a state's time (the controller's phase
 #: and the state's delivery are not known), in steps of ECHO_STEP [s].
 ECHO_WINDOW = 0.03
@@ -382,7 +391,9 @@ class BlockDetector:
                 self._pressed = sign
         self.released_at: float | None = None
         self.expect_motion = expect_motion      # a block without any motion: not executed
-        self.started = False                    # the arm has been seen to move
+        # the arm has been seen to move; a command that starts pressed in is not waited for
+        # (it starts the press gap away from the arm: a late take cannot be told from it)
+        self.started = self._pressed is not None
         self.late = 0.0                         # how late the controller took the command [s]
         self._first: list[np.ndarray] = []     # the samples of the first ENDS seconds
         self.settings = settings or DetectorSettings()
@@ -511,14 +522,16 @@ class BlockDetector:
         A command taken late (or an arm that lags) is within ``d_dist`` of its end before the
         arm gets there: taken as done then, the run saw the arm short of the goal, planned
         from there and sent a path back to where it had been, again and again (a command
-        latency of 0.25 s on the physics mock: 20 paths, none within the goal tolerance).
+        latency of 0.25 s on the physics demo: 18 paths, 13 of them ended short of the goal
+        without a block).  Fewer than ``SETTLE_SAMPLES`` states within the window (slow
+        joint states, or just after a release) tell nothing: not at rest (``settle_time``
+        after the end bounds the wait); over a longer window the noise estimate would take
+        the arm's deceleration for noise.
         """
         now = self._history[-1][0]
         recent = [sample for sample in self._history if sample[0] >= now - SETTLE_WINDOW]
-        if len(recent) < 3:
-            recent = list(self._history)[-3:]
-        if len(recent) < 3:
-            return True
+        if len(recent) < SETTLE_SAMPLES:
+            return False
         times = np.array([when for when, _ in recent])
         motion, noise = motion_over(times, np.array([q for _, q in recent]))
         return motion <= self.settings.stall_motion + noise
@@ -604,11 +617,16 @@ class BlockDetector:
             s = self.settings
             within = (not s.gap_ceiling or self.gap <= s.gap_ceiling) and \
                 (not s.joint_gap_ceiling or self.joint_gaps.max() <= s.joint_gap_ceiling)
-            if self._history[-1][0] - self.start_time < START_WAIT and within:
-                return Verdict.MOVING             # the controller may take it late
+            waited = self._history[-1][0] - self.start_time
             if not self.expect_motion:      # a retreat, or a path from a pressed arm
-                return self._blocked(f'{reason}; the arm has not moved since the command '
-                                     f'began')
+                # held (its torque pulls toward the command) or waited for long enough
+                if waited < RETREAT_START_WAIT and within and \
+                        self._held_rise().sum() < HELD_TORQUE_RISE:
+                    return Verdict.MOVING         # the controller may take it late
+                return self._blocked(f'{reason}; the arm has not moved in {waited:.2f} s '
+                                     f'since the command began')
+            if waited < START_WAIT and within:
+                return Verdict.MOVING             # the controller may take it late
             moved, _ = self.moved()
             still = (f'the arm has not moved since the command began ({moved:.3f} rad L1 in '
                      f'{self._history[-1][0] - self.start_time:.2f} s, {reason})')

@@ -336,7 +336,8 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
             sent, command = early
             command, early = _on_recording_clock(command, offset, t0), None
             running = (JtcTrajectory(command, q, measured_velocity, sent), sent)
-            detector, kind = BlockDetector(running[0], sent, settings), 'path'
+            # a path from a free arm, as the live run's first one
+            detector, kind = BlockDetector(running[0], sent, settings, expect_motion=True), 'path'
             result.paths += 1
             result.problems.append(f'{sent:.3f} s: command before any joint state: started '
                                    f'from the first one, at {t:.3f} s')
