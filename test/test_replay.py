@@ -391,9 +391,13 @@ def test_states_a_hair_past_a_limit_are_replayed_clipped_as_the_live_run_takes_t
     # the replay's were not clipped; the shared state check clips them for both)
     messages, _, _ = simulated_run()
     upper = iiwa_arm().upper[1]
-    past = [(stamp, topic, dict(fields, position=[fields['position'][0], upper + 0.001,
-                                                 *fields['position'][2:]]))
-            if topic == JS else (stamp, topic, fields) for stamp, topic, fields in messages]
+
+    def past_the_limit(fields):
+        position = list(fields['position'])
+        position[1] = upper + 0.001
+        return dict(fields, position=position)
+    past = [(stamp, topic, past_the_limit(fields) if topic == JS else fields)
+            for stamp, topic, fields in messages]
     write_bag(tmp_path / 'bag', past, 9, StoragePlugin.MCAP)
     result = replay(tmp_path / 'bag')
     assert not any('refused' in p for p in result.problems)
