@@ -146,14 +146,22 @@ def test_torque_noise_on_every_pulled_joint_makes_no_idle_arm_held(spring, noise
         assert found is verdict, detector.reason
 
 
+#: Where the observer tests start the physics arm in free space.
+Q_FREE = np.array([0.2, 0.3, -0.4, -1.2, 0.3, 0.6, -0.5])
+
+
+def loaded_arm_in_free_space():
+    """Return the bar's load settings, the physics arm at rest at Q_FREE, and an observer."""
+    settings = DetectorSettings(load_mass=0.5, load_com=BAR['position'])
+    arm = PhysicsIiwa(bar_scene(box=False), FREE_SPACE)
+    arm.reset(Q_FREE)
+    return settings, arm, ExternalTorqueObserver(settings)
+
+
 def test_the_observer_keeps_its_estimate_over_a_pause_and_skips_a_repeated_stamp():
     # mid-motion, effort - g(q) holds the torques that accelerate the arm: starting again
     # from there after a pause in the joint states would read them as a push
-    settings = DetectorSettings(load_mass=0.5, load_com=BAR['position'])
-    arm = PhysicsIiwa(bar_scene(box=False), FREE_SPACE)
-    q0 = np.array([0.2, 0.3, -0.4, -1.2, 0.3, 0.6, -0.5])
-    arm.reset(q0)
-    observer = ExternalTorqueObserver(settings)
+    settings, arm, observer = loaded_arm_in_free_space()
     observed, static = [], []
 
     def record(a):
@@ -161,7 +169,7 @@ def test_the_observer_keeps_its_estimate_over_a_pause_and_skips_a_repeated_stamp
         static.append(observer.static)
 
     record(arm)
-    setpoint = ramp(arm, q0, q0 + 0.45, 0.2, record)      # still speeding up
+    setpoint = ramp(arm, Q_FREE, Q_FREE + 0.45, 0.2, record)      # still speeding up
     before = observed[-1].copy()
     arm.advance(setpoint + 0.1, 0.3)                       # 0.3 s without joint states
     record(arm)
@@ -177,11 +185,7 @@ def test_the_observer_keeps_its_estimate_over_a_pause_and_skips_a_repeated_stamp
 def test_the_observer_leaves_out_what_accelerates_the_arm_and_finds_what_presses_on_it():
     # a free move that starts and stops abruptly (a setpoint ramp, no profile): effort - g(q)
     # reads the torques that accelerate the arm as external, the momentum observer does not
-    settings = DetectorSettings(load_mass=0.5, load_com=BAR['position'])
-    arm = PhysicsIiwa(bar_scene(box=False), FREE_SPACE)
-    q0 = np.array([0.2, 0.3, -0.4, -1.2, 0.3, 0.6, -0.5])
-    arm.reset(q0)
-    observer = ExternalTorqueObserver(settings)
+    settings, arm, observer = loaded_arm_in_free_space()
     static, observed = [], []
 
     def record(a):
@@ -189,7 +193,7 @@ def test_the_observer_leaves_out_what_accelerates_the_arm_and_finds_what_presses
         observed.append(observer.update(a.time, a.q, a.qdot, a.tau_measured))
 
     record(arm)
-    setpoint = ramp(arm, q0, q0 + 0.45, 1.5, record)
+    setpoint = ramp(arm, Q_FREE, Q_FREE + 0.45, 1.5, record)
     for _ in range(100):
         arm.advance(setpoint, 0.01)
         record(arm)
