@@ -137,6 +137,8 @@ class KinematicEngine:
         self.time += duration
 
 
+#: The faults of the command path and the driver (RobotSettings' non-negative fields).
+DRIVER_FAULTS = ('noise', 'effort_noise', 'latency', 'command_latency', 'speed_monitor')
 #: The second word of the seed of the joint torques' noise stream (RobotSettings.seed first).
 EFFORT_STREAM = 1
 
@@ -162,8 +164,7 @@ class RobotSettings:
         """Refuse settings that cannot run."""
         if not self.period > 0:
             raise ValueError(f'period must be positive, got {self.period}')
-        for name in ('filter_tau', 'noise', 'effort_noise', 'latency', 'command_latency',
-                     'speed_monitor'):
+        for name in ('filter_tau', *DRIVER_FAULTS):
             if not getattr(self, name) >= 0:
                 raise ValueError(f'{name} must be non-negative, got {getattr(self, name)}')
         if self.jtc_start not in JTC_STARTS:
@@ -353,6 +354,9 @@ class SimulatedRobot:
 ENGINES = ('physics', 'kinematic')
 
 
+#: The faults of the physics arm alone.
+PHYSICS_FAULTS = ('object_mass_error', 'armature', 'grasp_stiffness', 'stiffness',
+                  'damping_ratio')
 #: What a real setup adds to the ideal mock, by the mock node's parameter names: the
 #: driver's joint-state ``noise`` [rad], ``effort_noise`` [Nm] and ``latency`` [s], the
 #: delivery of its commands, ``command_latency`` [s] (a loaded machine or network, a large
@@ -361,11 +365,7 @@ ENGINES = ('physics', 'kinematic')
 #: joint] and a grasp that gives, ``grasp_stiffness`` [Nm/rad]; and the robot application's
 #: joint impedance, ``stiffness`` [Nm/rad, every joint] and ``damping_ratio``, which a user
 #: sets on the real arm (PhysicsSettings; the physics arm only).
-FAULTS = ('noise', 'effort_noise', 'latency', 'command_latency', 'speed_monitor',
-          'object_mass_error', 'armature', 'grasp_stiffness', 'stiffness', 'damping_ratio')
-#: The faults of the physics arm alone.
-PHYSICS_FAULTS = ('object_mass_error', 'armature', 'grasp_stiffness', 'stiffness',
-                  'damping_ratio')
+FAULTS = DRIVER_FAULTS + PHYSICS_FAULTS
 
 
 def with_faults(faults: Mapping[str, float], settings: RobotSettings | None = None
@@ -381,9 +381,7 @@ def with_faults(faults: Mapping[str, float], settings: RobotSettings | None = No
     if unknown:
         raise ValueError(f'no fault {unknown[0]!r} (one of {", ".join(FAULTS)})')
     robot = replace(settings or RobotSettings(),
-                    **{k: float(v) for k, v in faults.items()
-                       if k in ('noise', 'effort_noise', 'latency', 'command_latency',
-                                'speed_monitor')})
+                    **{k: float(v) for k, v in faults.items() if k in DRIVER_FAULTS})
     physics = replace(PhysicsSettings(), **{k: float(v) for k, v in faults.items()
                                             if k in ('object_mass_error', 'grasp_stiffness',
                                                      'damping_ratio')})
