@@ -116,6 +116,34 @@ def test_latency_delays_and_noise_perturbs_the_reported_state_reproducibly():
     np.testing.assert_array_equal(noisy[-1].position, again[-1].position)
 
 
+def test_the_driver_differences_its_measured_positions_into_velocities_and_jtc_reads_them():
+    # the lbr stack's compute_hw_velocity_: (measured now - measured a period before) / period,
+    # so the encoders' noise reaches the velocity divided by the period; JTC reads the same
+    # state interfaces, and starts a command from that noisy state, not from the arm's own
+    noise, period = 1e-4, RobotSettings().period
+    robot, _ = build_robot('physics', free_scene(), RobotSettings(noise=noise, seed=5))
+    before = robot.joint_state()
+    assert not before.velocity.any()            # the first measurement: at rest
+    idle = []
+    for _ in range(200):
+        robot.step()
+        state = robot.joint_state()
+        np.testing.assert_allclose(state.velocity, (state.position - before.position) / period,
+                                   rtol=0, atol=1e-12)
+        idle.append(state.velocity)
+        before = state
+    # the arm rests: what the velocities show is the noise, sqrt(2) noise / period
+    assert 0.85 < np.std(idle) / (np.sqrt(2) * noise / period) < 1.15
+    assert np.abs(robot.engine.qdot).max() < 1e-3
+    seen = robot.joint_state()
+    command_to(robot, np.array([0.5, 0.3, 0.2, -1.0, 0.1, 0.7, 0.2]))
+    robot.step()
+    start_q, start_v = robot.controller.trajectory.before[:2]
+    np.testing.assert_array_equal(start_q, seen.position)
+    np.testing.assert_array_equal(start_v, seen.velocity)
+    assert np.abs(start_q - robot.engine.q).max() > noise / 10
+
+
 def test_a_command_latency_holds_each_message_back_and_the_newest_one_replaces_the_rest():
     goal = np.array([0.3, 0.2, 0.0, -1.1, 0.0, 0.6, 0.0])
     runs = {}

@@ -38,11 +38,15 @@ real driver that threw "invalid command" leaves it.  KUKA's own Cartesian speed 
 keep 250 mm/s) stops it the same way when a point of the arm (its URDF collision shapes and
 the flange) moves faster: a safety stop ends the FRI session.
 
-What the driver reports (:meth:`SimulatedRobot.joint_state`) can carry the faults a real
-setup shows: Gaussian noise, a latency, and the "echo" of a driver with ``open_loop`` in
-effect, whose joint states are the position it commands (JTC's command after the driver's
-filter, as the lbr stack's ``set_state_open_loop`` copies it) instead of the measured one,
-with velocities by differences of those positions and the measured torques as they are.
+What the driver measures is what JTC reads and what it reports: the arm's position (with the
+encoders' Gaussian ``noise``, if any) and, as the lbr stack's ``compute_hw_velocity_`` makes
+it, a velocity that is the difference of the last two measured positions over the period
+(so the noise reaches it divided by the period; the engine's own velocity is never seen).
+The reported joint states (:meth:`SimulatedRobot.joint_state`) can also come late
+(``latency``), and a driver with ``open_loop`` in effect "echoes": its position is the one
+it commands (JTC's command after the driver's filter, as the lbr stack's
+``set_state_open_loop`` copies it), differenced the same way, with the measured torques
+as they are.
 Commands can reach JTC late (``command_latency``), as on a loaded machine or network.
 No rclpy: the mock node and ``probdis sim --engine physics`` both drive this class.
 """
@@ -220,7 +224,8 @@ class SimulatedRobot:
         self._reported: deque[JointStateSample] = deque()
         # (when JTC gets it, the command) of messages still on their way (command_latency)
         self._in_flight: deque[tuple[float, TrajectoryCommand]] = deque()
-        self._report()
+        self._measured: JointStateSample | None = None   # none before: velocity 0
+        self._measure()
 
     def restart(self) -> None:
         """
@@ -267,7 +272,7 @@ class SimulatedRobot:
             return
         while self._in_flight and self._in_flight[0][0] <= self.engine.time + 1e-12:
             self.controller.receive(self._in_flight.popleft()[1])   # the newest replaces
-        state = self._state()       # JTC starts a new trajectory from the reported state
+        state = self._measured      # JTC starts a new trajectory from the measured state
         # (or, jtc_start 'desired', from its last command)
         previous = self.commanded
         self.commanded = self.controller.update(self.engine.time, state.position,
@@ -287,7 +292,7 @@ class SimulatedRobot:
                 self._held = self.engine.q.copy()
                 self._stop_torque = self._external_torque()
                 return
-        self._report()
+        self._measure()
 
     def _speed_over_limit(self, change: np.ndarray) -> float:
         speed = np.abs(change) / self.settings.period
@@ -317,31 +322,31 @@ class SimulatedRobot:
                     f'limit {limits.velocity_limits[joint]:.2f} rad/s')
         return None
 
-    def _state(self) -> JointStateSample:
-        """Return what the driver's state interfaces hold now (no noise, no latency)."""
-        e = self.engine
-        # the kinematic engine models no torques: its states carry none (zeros would read as
-        # the whole of gravity pressing on the arm)
+    def _measure(self) -> None:
+        """
+        Measure the arm now, as the driver's state interfaces hold it, and report it.
+
+        The position is the arm's (the echo: the driver's filtered command) with the
+        encoders' noise; the velocity its difference from the measurement one period
+        before (0 at the first, the arm at rest); the torques the engine's, with their noise
+        (the kinematic engine models none: its states carry none, as zeros would read as
+        the whole of gravity pressing on the arm).
+        """
+        e, settings = self.engine, self.settings
+        position = self.filter.value.copy() if settings.echo else e.q.copy()
+        if settings.noise > 0:
+            position = position + self.rng.normal(scale=settings.noise, size=position.shape)
+        before = self._measured
+        velocity = np.zeros_like(position) if before is None else \
+            (position - before.position) / settings.period
         torques = getattr(e, 'tau_measured', None)
         effort = None if torques is None else np.asarray(torques).copy()
-        if self.settings.echo:
-            sent = self.filter.value.copy()
-            velocity = (sent - self._sent_before) / self.settings.period
-            return JointStateSample(e.time, sent, velocity, effort)
-        return JointStateSample(e.time, e.q.copy(), e.qdot.copy(), effort)
-
-    def _report(self) -> None:
-        state = self._state()
-        if self.settings.noise > 0:
-            noisy = state.position + self.rng.normal(scale=self.settings.noise,
-                                                     size=state.position.shape)
-            state = JointStateSample(state.time, noisy, state.velocity, state.effort)
-        if self.settings.effort_noise > 0 and state.effort is not None:
-            noisy = state.effort + self.effort_rng.normal(scale=self.settings.effort_noise,
-                                                          size=state.effort.shape)
-            state = JointStateSample(state.time, state.position, state.velocity, noisy)
-        self._reported.append(state)
-        horizon = self.engine.time - self.settings.latency
+        if settings.effort_noise > 0 and effort is not None:
+            effort = effort + self.effort_rng.normal(scale=settings.effort_noise,
+                                                     size=effort.shape)
+        self._measured = JointStateSample(e.time, position, velocity, effort)
+        self._reported.append(self._measured)
+        horizon = e.time - settings.latency
         while len(self._reported) > 1 and self._reported[1].time <= horizon + 1e-12:
             self._reported.popleft()
 
