@@ -19,7 +19,12 @@ from dataclasses import replace
 
 import numpy as np
 from probdis_ros.model import iiwa_arm
-from probdis_ros.motion.jtc import DRIVER_FILTER_TAU, FirstOrderFilter, JtcTrajectory
+from probdis_ros.motion.jtc import (
+    DRIVER_FILTER_TAU,
+    DRIVER_TORQUE_TAU,
+    FirstOrderFilter,
+    JtcTrajectory,
+)
 from probdis_ros.motion.timing import time_path
 from probdis_ros.physics import load_scene, measure
 from probdis_ros.physics.simulated_robot import build_robot, RobotSettings
@@ -83,6 +88,8 @@ def test_an_echoing_driver_reports_the_command_it_sends_after_its_filter():
     jtc, duration = command_to(robot, goal, 0.5)
     sent = FirstOrderFilter(DRIVER_FILTER_TAU)
     sent.reset(robot.joint_state().position)
+    torques = FirstOrderFilter(DRIVER_TORQUE_TAU)
+    torques.reset(robot.joint_state().effort)
     before = sent.value.copy()
     while robot.time < duration:
         command = jtc.at(robot.time + robot.settings.period - jtc.taken_at)
@@ -92,7 +99,7 @@ def test_an_echoing_driver_reports_the_command_it_sends_after_its_filter():
         assert np.abs(reported.position - expected).max() < 1e-12
         assert np.abs(reported.velocity - (expected - before) / robot.settings.period
                       ).max() < 1e-9
-        assert np.array_equal(reported.effort, robot.engine.tau_measured)
+        np.testing.assert_array_equal(reported.effort, torques(robot.engine.tau_measured))
         before = expected
     assert np.abs(reported.position - robot.engine.q).sum() > 0.02   # the arm lags
 
@@ -144,6 +151,29 @@ def test_the_driver_differences_its_measured_positions_into_velocities_and_jtc_r
     assert np.abs(start_q - robot.engine.q).max() > noise / 10
 
 
+def test_the_driver_filters_the_torques_it_reports_so_they_lag_the_arms():
+    # the lbr stack's measured_torque_tau: a first-order filter (0.1 s as it ships) between
+    # the arm's torque sensors and the effort state interface
+    goal = np.array([0.5, 0.3, 0.2, -1.0, 0.1, 0.7, 0.2])
+    lags = {}
+    for tau in (DRIVER_TORQUE_TAU, 0.0):
+        robot, _ = build_robot('physics', free_scene(), RobotSettings(torque_tau=tau))
+        expected = FirstOrderFilter(tau)
+        expected.reset(robot.engine.tau_measured)
+        command_to(robot, goal, 0.5)
+        worst = 0.0
+        for _ in range(150):
+            robot.step()
+            effort = robot.joint_state().effort
+            np.testing.assert_allclose(effort, expected(robot.engine.tau_measured),
+                                       rtol=0, atol=1e-9)
+            worst = max(worst, float(np.abs(effort - robot.engine.tau_measured).max()))
+        lags[tau] = worst
+    assert lags[0.0] == 0.0 and lags[DRIVER_TORQUE_TAU] > 0.5     # [Nm], as the arm speeds up
+    with pytest.raises(ValueError, match='torque_tau'):
+        RobotSettings(torque_tau=-0.1)
+
+
 def test_a_command_latency_holds_each_message_back_and_the_newest_one_replaces_the_rest():
     goal = np.array([0.3, 0.2, 0.0, -1.1, 0.0, 0.6, 0.0])
     runs = {}
@@ -185,11 +215,11 @@ def test_torque_noise_perturbs_the_reported_efforts_alone_from_a_stream_of_its_o
             states.append((robot.joint_state(), robot.engine.tau_measured.copy()))
         runs.append(states)
     plain, noisy, again = runs
-    # the positions (and their noise) as without it; the efforts about the measured torques
+    # the positions (and their noise) as without it; the efforts about those without it
     for (quiet, _), (loud, _), (same, _) in zip(plain, noisy, again):
         np.testing.assert_array_equal(loud.position, quiet.position)
         np.testing.assert_array_equal(loud.effort, same.effort)
-    errors = np.array([state.effort - truth for state, truth in noisy])
+    errors = np.array([loud.effort - quiet.effort for (quiet, _), (loud, _) in zip(plain, noisy)])
     assert 1.7 < errors.std() < 2.3 and abs(errors.mean()) < 0.3
     with pytest.raises(ValueError, match='effort_noise'):
         RobotSettings(effort_noise=-1.0)

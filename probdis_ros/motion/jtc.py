@@ -59,6 +59,11 @@ CONTROLLER_RATE = 100.0
 #: The time constant [s] of the lbr stack driver's command filter (PR #220 on; its
 #: ``joint_position_tau`` default), which every position command passes before FRI.
 DRIVER_FILTER_TAU = 0.04
+#: The time constant [s] of the same first-order filter on the measured joint torques before
+#: they reach the effort state interface (``measured_torque_tau`` in the lbr stack's
+#: ``lbr_system_config.yaml``, which ships 0.1; its code's default 0.04; releases before
+#: PR #220 a 10 Hz low-pass, about 0.016): the efforts in the joint states lag the arm's.
+DRIVER_TORQUE_TAU = 0.1
 #: Older releases moved the command 0.1 of the way to its target each 10 ms cycle: the same
 #: first-order filter with this time constant [s].
 OLD_DRIVER_FILTER_TAU = -1.0 / (CONTROLLER_RATE * math.log(0.9))

@@ -43,7 +43,9 @@ encoders' Gaussian ``noise``, if any) and, as the lbr stack's ``compute_hw_veloc
 it, a velocity that is the difference of the last two measured positions over the period
 (so the noise reaches it divided by the period; the engine's own velocity is never seen).
 The reported joint states (:meth:`SimulatedRobot.joint_state`) can also come late
-(``latency``), and a driver with ``open_loop`` in effect "echoes": its position is the one
+(``latency``); their torques come through the driver's first-order filter
+(``torque_tau``, the lbr stack's ``measured_torque_tau``), so they lag the arm's by about
+0.1 s; and a driver with ``open_loop`` in effect "echoes": its position is the one
 it commands (JTC's command after the driver's filter, as the lbr stack's
 ``set_state_open_loop`` copies it), differenced the same way, with the measured torques
 as they are.
@@ -68,6 +70,7 @@ from probdis_ros.motion.jtc import (
     CONTROLLER_RATE,
     DEFAULT_JTC_START,
     DRIVER_FILTER_TAU,
+    DRIVER_TORQUE_TAU,
     FirstOrderFilter,
     JTC_STARTS,
     TrajectoryCommand,
@@ -153,6 +156,7 @@ class RobotSettings:
 
     period: float = 1.0 / CONTROLLER_RATE   # JTC and driver cycle [s]
     filter_tau: float = DRIVER_FILTER_TAU   # the driver's command filter [s]; 0: none
+    torque_tau: float = DRIVER_TORQUE_TAU   # its filter of the measured torques [s]; 0: none
     noise: float = 0.0                      # std. dev. of reported positions [rad]
     effort_noise: float = 0.0               # std. dev. of reported joint torques [Nm]
     latency: float = 0.0                    # reported joint states are this old [s]
@@ -168,7 +172,7 @@ class RobotSettings:
         """Refuse settings that cannot run."""
         if not self.period > 0:
             raise ValueError(f'period must be positive, got {self.period}')
-        for name in ('filter_tau', *DRIVER_FAULTS):
+        for name in ('filter_tau', 'torque_tau', *DRIVER_FAULTS):
             if not getattr(self, name) >= 0:
                 raise ValueError(f'{name} must be non-negative, got {getattr(self, name)}')
         if self.jtc_start not in JTC_STARTS:
@@ -194,6 +198,7 @@ class SimulatedRobot:
         self.engine = engine
         self.settings = settings or RobotSettings()
         self.filter = FirstOrderFilter(self.settings.filter_tau, self.settings.period)
+        self.torque_filter = FirstOrderFilter(self.settings.torque_tau, self.settings.period)
         self.rng = np.random.default_rng(self.settings.seed)
         # the torques' noise from a stream of its own: the positions' stays as it was
         self.effort_rng = np.random.default_rng((self.settings.seed, EFFORT_STREAM))
@@ -215,6 +220,7 @@ class SimulatedRobot:
         q = self.engine.q
         self.controller = TrajectoryController(self.settings.period, self.settings.jtc_start)
         self.filter.reset(q)
+        self.torque_filter.value = None      # starts at the first torque it is given
         if self.limiter is not None:
             self.limiter.reset(q)
         self.commanded = q.copy()             # JTC's last position command
@@ -328,9 +334,10 @@ class SimulatedRobot:
 
         The position is the arm's (the echo: the driver's filtered command) with the
         encoders' noise; the velocity its difference from the measurement one period
-        before (0 at the first, the arm at rest); the torques the engine's, with their noise
-        (the kinematic engine models none: its states carry none, as zeros would read as
-        the whole of gravity pressing on the arm).
+        before (0 at the first, the arm at rest); the torques the engine's through the
+        driver's filter (``torque_tau``; it starts at the first torque), with the published
+        torques' noise (the kinematic engine models none: its states carry none, as zeros
+        would read as the whole of gravity pressing on the arm).
         """
         e, settings = self.engine, self.settings
         position = self.filter.value.copy() if settings.echo else e.q.copy()
@@ -340,7 +347,7 @@ class SimulatedRobot:
         velocity = np.zeros_like(position) if before is None else \
             (position - before.position) / settings.period
         torques = getattr(e, 'tau_measured', None)
-        effort = None if torques is None else np.asarray(torques).copy()
+        effort = None if torques is None else self.torque_filter(torques)
         if settings.effort_noise > 0 and effort is not None:
             effort = effort + self.effort_rng.normal(scale=settings.effort_noise,
                                                      size=effort.shape)

@@ -51,7 +51,7 @@ import time
 from builtin_interfaces.msg import Time
 import numpy as np
 from probdis_ros.model import iiwa_arm
-from probdis_ros.motion.jtc import DEFAULT_JTC_START
+from probdis_ros.motion.jtc import DEFAULT_JTC_START, DRIVER_TORQUE_TAU
 from probdis_ros.physics.settings import PhysicsSettings
 from probdis_ros.physics.simulated_robot import (
     build_robot,
@@ -109,6 +109,9 @@ class MockIiwa(Node):
         p('latency', 0.0, _describe('delay of published joint states [s]', 0.0, 1.0))
         p('command_latency', 0.0, _describe('delay of each trajectory message before JTC '
                                             'takes it [s]', 0.0, 1.0))
+        p('measured_torque_tau', DRIVER_TORQUE_TAU, _describe(
+            "the driver's first-order filter of the measured joint torques before they are "
+            "published [s] (the lbr stack's parameter of that name; 0: none)", 0.0, 10.0))
         p('echo', False, _describe('report the commanded position (a driver in open loop)'))
         p('speed_monitor', 0.0, _describe(
             "KUKA's Cartesian speed monitoring [m/s]: a point of the arm (URDF collision "
@@ -159,6 +162,7 @@ class MockIiwa(Node):
             {name: value(name) for name in FAULTS},
             RobotSettings(period=1.0 / value('rate'), echo=value('echo'), seed=value('seed'),
                           limiter=value('enforce_command_limits'),
+                          torque_tau=value('measured_torque_tau'),
                           jtc_start='desired' if value('interpolate_from_desired_state')
                           else 'measured'))
         world = value('scene') if value('engine') == 'physics' else value('scenario')
