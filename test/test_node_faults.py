@@ -792,9 +792,13 @@ def test_a_second_joint_state_publisher_stops_the_run_and_learns_nothing(ros, tm
 
 def test_a_block_is_seen_promptly_through_joint_state_noise_at_1khz(ros, tmp_path):
     """0.005 rad of noise at 1 kHz: the stall is seen (before, only the gap ceiling was)."""
-    # the paper's method meets the box's wall first (informed may turn out of it unblocked)
+    # the paper's method meets the box's wall first (informed may turn out of it unblocked);
+    # velocities differenced from such positions would be 7 rad/s of noise, which the state
+    # check refuses (test_velocities_differenced_from_very_noisy_positions_are_refused):
+    # these states carry none
     planner(ros, tmp_path, motion_delay=0.04, velocity_scaling=0.1, method='probabilistic')
-    arm = mock_process(ros, 'rate:=1000.0', 'noise:=0.005', 'seed:=2')
+    arm = mock_process(ros, 'rate:=1000.0', 'noise:=0.005', 'seed:=2',
+                       'publish_velocities:=false')
     events = []
     ros.probe.create_subscription(String, '/probdis_planner/failures',
                                   lambda m: events.append(json.loads(m.data)), 10)
@@ -804,6 +808,27 @@ def test_a_block_is_seen_promptly_through_joint_state_noise_at_1khz(ros, tmp_pat
         assert events, ros.status
         assert events[0]['why'].startswith('stalled'), events[0]['why']
         ros.call('stop')
+    finally:
+        arm.send_signal(signal.SIGINT)
+        arm.wait(10)
+
+
+def test_velocities_differenced_from_very_noisy_positions_are_refused(ros, tmp_path):
+    # the lbr stack differences the measured positions into velocities: 0.005 rad of noise
+    # at 1 kHz is 7 rad/s in them, past what the arm can do; a run must not start (every
+    # stop starts from the measured velocity), and the start's reply says why
+    planner(ros, tmp_path)
+    arm = mock_process(ros, 'rate:=1000.0', 'noise:=0.005', 'seed:=2')
+    try:
+        replies = []
+
+        def refused():
+            replies.append(ros.call('start', timeout=30))
+            return 'velocity' in replies[-1].message
+        wait_for(refused, 30, 'a refused start')
+        assert not replies[-1].success, replies[-1].message
+        assert 'glitch in the driver' in replies[-1].message, replies[-1].message
+        assert ros.status.get('paths', 0) == 0, ros.status
     finally:
         arm.send_signal(signal.SIGINT)
         arm.wait(10)

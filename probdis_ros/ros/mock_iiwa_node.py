@@ -109,6 +109,9 @@ class MockIiwa(Node):
         p('latency', 0.0, _describe('delay of published joint states [s]', 0.0, 1.0))
         p('command_latency', 0.0, _describe('delay of each trajectory message before JTC '
                                             'takes it [s]', 0.0, 1.0))
+        p('publish_velocities', True, _describe(
+            'publish the measured velocities (false: joint states without them, as a '
+            'joint_state_broadcaster whose interfaces leave them out)'))
         p('measured_torque_tau', DRIVER_TORQUE_TAU, _describe(
             "the driver's first-order filter of the measured joint torques before they are "
             "published [s] (the lbr stack's parameter of that name; 0: none)", 0.0, 10.0))
@@ -168,6 +171,7 @@ class MockIiwa(Node):
         world = value('scene') if value('engine') == 'physics' else value('scenario')
         self.robot, self.description = build_robot(value('engine'), world, settings, physics)
         self.sim_time = bool(value('sim_time'))
+        self.publish_velocities = bool(value('publish_velocities'))
         self.factor = float(value('real_time_factor'))
         # simulated time starts at the wall clock (its arm's: clock_offset), so stamps and
         # bags read as real dates
@@ -286,7 +290,7 @@ class MockIiwa(Node):
         msg.header.stamp = self._stamp(state.time)
         msg.name = list(self.joint_names)
         msg.position = state.position.tolist()
-        msg.velocity = state.velocity.tolist()
+        msg.velocity = state.velocity.tolist() if self.publish_velocities else []
         msg.effort = [] if state.effort is None else state.effort.tolist()
         self.pub.publish(msg)
 
