@@ -62,11 +62,37 @@ def test_pressing_into_an_obstacle_is_seen_as_the_contact_torque():
 def test_the_torque_ceiling_declares_a_block_at_once_whatever_the_gap(ceiling, extra, verdict):
     gravity = GravityModel()
     settings = DetectorSettings(torque_ceiling=ceiling)
-    detector = BlockDetector(hold(HELD), 0.0, settings)
+    detector = BlockDetector(hold(HELD), 0.0, settings, expect_motion=True)   # a free arm's path
     effort = gravity(HELD) + np.array([0, extra, 0, 0, 0, 0, 0])
     assert detector.update(0.1, HELD, external_torque(settings, HELD, effort)) is verdict
     if verdict is Verdict.BLOCKED:
         assert detector.reason == f'joint A2 external torque {extra:.1f} Nm above 20.0 Nm'
+
+
+def test_a_retreat_that_begins_pressed_above_the_torque_ceiling_is_judged_once_below_it():
+    # right after a block the press's torque is still above the ceiling, and the driver's
+    # filter of the torques (0.1 s as the lbr stack ships it) and the observer keep it there
+    # into the retreat: that is no block of the retreat (on the physics demo with a 15 Nm
+    # ceiling, retreat after retreat was called blocked: RESULTS.md)
+    gravity = GravityModel()
+    settings = DetectorSettings(torque_ceiling=20.0)
+
+    def estimate(a2, a4=0.0):
+        effort = gravity(HELD) + np.array([0, a2, 0, a4, 0, 0, 0])
+        return external_torque(settings, HELD, effort)
+
+    detector = BlockDetector(hold(HELD), 0.0, settings)         # a retreat: need not move
+    for k, a2 in enumerate((26.0, 25.0, 23.0, 21.0)):            # falling, still above
+        assert detector.update(0.01 * (k + 1), HELD, estimate(a2)) is Verdict.MOVING
+    # a joint below the ceiling from the start is judged at once
+    assert detector.update(0.05, HELD, estimate(21.0, a4=20.5)) is Verdict.BLOCKED
+    assert detector.reason == 'joint A4 external torque 20.5 Nm above 20.0 Nm'
+    # and a joint once it has come below: pressed into something again
+    detector = BlockDetector(hold(HELD), 0.0, settings)
+    for k, a2 in enumerate((26.0, 12.0)):
+        assert detector.update(0.01 * (k + 1), HELD, estimate(a2)) is Verdict.MOVING
+    assert detector.update(0.03, HELD, estimate(20.5)) is Verdict.BLOCKED
+    assert detector.reason == 'joint A2 external torque 20.5 Nm above 20.0 Nm'
 
 
 def test_the_torque_ceiling_needs_the_load_data_and_waits_without_efforts():
@@ -75,7 +101,8 @@ def test_the_torque_ceiling_needs_the_load_data_and_waits_without_efforts():
     wrong = DetectorSettings(torque_ceiling=5.0)                # the 1 kg object left out
     for settings, verdict in ((right, Verdict.MOVING), (wrong, Verdict.BLOCKED)):
         estimate = external_torque(settings, HELD, loaded)
-        assert BlockDetector(hold(HELD), 0.0, settings).update(0.1, HELD, estimate) is verdict
+        detector = BlockDetector(hold(HELD), 0.0, settings, expect_motion=True)
+        assert detector.update(0.1, HELD, estimate) is verdict
     # joint states without efforts, or with efforts that give no estimate: the gaps decide
     nan = np.full(7, np.nan)
     for effort in (None, np.zeros(0), np.zeros(6), nan, np.where(np.arange(7) == 1, np.inf, 0)):

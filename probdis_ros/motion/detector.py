@@ -30,7 +30,11 @@ joint impedance follows its command with a lag) with where it is.  The L1 gap
   external-torque estimate (:class:`ExternalTorqueObserver`: the efforts less the arm's
   gravity and dynamics) exceeds ``torque_ceiling`` at a joint (0: off; it needs the load
   data right, as KUKA's does); the observer lags a sudden contact by its time constant
-  (40 ms to 63 %), so the arm presses somewhat past the ceiling before it trips;
+  (40 ms to 63 %), and the lbr stack's filter of the torques by 0.1 s more, so the arm
+  presses somewhat past the ceiling before it trips; the same lag carries a block's torque
+  into the retreat after it, so a command that need not move the arm (``expect_motion``
+  false) judges a joint by the ceiling only once its torque has come below it (the gap
+  tests judge it meanwhile);
 * **done** when the trajectory has ended, the gap to its last point is at most ``d_dist``,
   and the arm has come to rest (or ``settle_time`` has passed since the end);
 * **echo** when the measured positions have followed the moving command as the driver
@@ -408,6 +412,11 @@ class BlockDetector:
         self.gap = 0.0
         self.joint_gaps = np.zeros(0)
         self.external_torque: np.ndarray | None = None
+        # the joints the torque ceiling judges: a command that need not move the arm (a
+        # retreat, a path from a pressed arm) may begin with the press's torque still above
+        # the ceiling (the driver's torque filter, the observer lag it by 0.1 s and more), so
+        # such a joint is judged once its torque has come below the ceiling
+        self._ceiling_armed: np.ndarray | None = None
         # external-torque estimates of the first and of the last ENDS seconds (with efforts)
         self._first_torques: list[np.ndarray] = []
         self._torques: deque[tuple[float, np.ndarray]] = deque()
@@ -467,7 +476,11 @@ class BlockDetector:
             while self._torques[0][0] < now - ENDS:
                 self._torques.popleft()
         if s.torque_ceiling and self.external_torque is not None:
-            over = np.abs(self.external_torque) - s.torque_ceiling
+            magnitude = np.abs(self.external_torque)
+            below = magnitude <= s.torque_ceiling
+            self._ceiling_armed = below | self.expect_motion if self._ceiling_armed is None \
+                else self._ceiling_armed | below
+            over = np.where(self._ceiling_armed, magnitude - s.torque_ceiling, -np.inf)
             if over.max() > 0:
                 joint = int(over.argmax())
                 return self._blocked(f'joint A{joint + 1} external torque '
