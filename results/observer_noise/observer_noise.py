@@ -17,9 +17,9 @@ The external-torque observer on an idle arm whose velocities are differenced pos
 
 The lbr stack's velocity state is the difference of two measured positions over their FRI
 time stamps, so the joint states' position noise reaches the observer's momentum divided
-by the period; the mock reports the arm's true velocities, so no run shows it.  Idle arm
-at the demo's start, exact efforts (its gravity), Gaussian noise on the positions, 100 Hz,
-10 s per level: the spread and the largest magnitude of the estimate per joint, and of
+by the period (the mock's driver differences them too, since the sixth session of
+2026-12-05).  Idle arm at the demo's start, exact efforts (its gravity), Gaussian noise on
+the positions, 100 Hz, 10 s per level: the spread and the largest magnitude of the estimate per joint, and of
 effort - g(q) (``static``, what the held test reads) for comparison.
 Usage: python results/observer_noise/observer_noise.py
 """
