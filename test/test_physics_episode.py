@@ -84,9 +84,8 @@ def test_the_runs_external_torque_estimate_is_the_contacts_with_the_load_data_ri
     # the planner's estimate, efforts minus g(q) with the hook's 0.4 kg, against the torques
     # the contacts exerted (MuJoCo's J^T f): the status reports how hard the arm pressed
     from probdis_ros.motion.detector import DetectorSettings
-    from probdis_ros.run import RunSettings
-
     from probdis_ros.physics.simulated_robot import RobotSettings
+    from probdis_ros.run import RunSettings
 
     load = RunSettings(detection=DetectorSettings(load_mass=0.4, load_com=(0.0, 0.0, 0.12)))
     episode = run_physics_episode('demo_hook', 'probabilistic', seed=1, max_paths=5,
