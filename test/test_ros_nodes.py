@@ -508,10 +508,13 @@ def test_stop_during_motion_decelerates_to_rest_within_the_limits(ros, tmp_path)
     assert np.abs(accelerations).max() <= 10.0 * 1.01
     assert np.abs(velocities[0]).max() > 0.0 and np.allclose(velocities[-1], 0.0)
     assert np.abs(np.diff(positions, axis=0)).max() <= 0.01 * iiwa_arm().velocity_limits.max()
-    time.sleep(times[-1] + 0.3)
+    # waited for on the arm's clock: a starved mock runs behind the wall clock (CI, on a
+    # loaded machine: 1e-4 rad still to settle after 0.3 s of wall time)
+    stopped = arm.robot.time
+    wait_for(lambda: arm.robot.time > stopped + times[-1] + 0.3, 10, 'the end of the stop')
     np.testing.assert_allclose(arm.q, positions[-1], atol=0.01)
-    held = np.array(arm.q)
-    time.sleep(0.3)
+    held, settled = np.array(arm.q), arm.robot.time
+    wait_for(lambda: arm.robot.time > settled + 0.3, 10, '0.3 s more on the arm')
     np.testing.assert_allclose(arm.q, held, atol=1e-4)     # the driver filter settling
     assert ros.status['state'] == 'stopped'
 
@@ -696,17 +699,20 @@ def test_the_planner_keeps_up_with_joint_states_at_1khz(ros, tmp_path):
         wait_for(lambda: ros.status.get('failures', 0) >= 1 or finished(ros), 60,
                  'the first block')
         assert ros.status['state'] not in ('stopped', 'gave_up'), ros.status
-        # the block was detected where the flange touches a hidden disc (the map reaches
-        # the disk from the planner's I/O thread, just after the status); the start is
-        # 0.18 m from every disc.  The states are dated by their stamps: dated by arrival,
-        # a burst held up in a starved mock (it takes a long command message for half a
-        # second on a slow 2-core machine) read as a lagging arm and the block was traced
-        # back to the start
+        # the block was detected at a hidden disc, not traced back to the start 0.18 m from
+        # every disc (the map reaches the disk from the planner's I/O thread, just after the
+        # status).  The states are dated by their stamps: dated by arrival, a burst held up
+        # in a starved mock (it takes a long command message for half a second on a slow
+        # 2-core machine) read as a lagging arm and the block was traced back to the start.
+        # A mock that takes the command up to LATE_TAKE late (sharing the cores) lags the
+        # planner's model of it by that much, and the gap's rise in the acceleration moves
+        # the onset before the touch: 0 to 29 mm from the disc in 36 runs on an idle
+        # machine (2026-12-05, code of then and of the session before alike)
         wait_for(lambda: (tmp_path / 'map.json').exists(), 5, 'the map file')
         x = FailureMap.load(tmp_path / 'map.json').points[0]
         gaps = [abs((x - o.center) @ o.normal) + max(0.0, np.linalg.norm(x - o.center) - o.radius)
                 for o in WORLD.obstacles]
-        assert min(gaps) < 0.02, gaps
+        assert min(gaps) < 0.05, gaps
         # no growing queue: the newest state stays fresh to the end (a backlog of 1 kHz
         # messages would age steadily, by seconds); single late samples are the scheduler,
         # not a queue, and a mock sharing the cores with another process publishes only
