@@ -344,12 +344,13 @@ class CommandLimiter:
 
 class FirstOrderFilter:
     """
-    The lbr stack driver's command filter: first order with time constant tau [s].
+    The lbr stack driver's filter: first order with time constant tau [s].
 
     From PR #220 on, the driver smooths every position command before it goes to FRI
     (:data:`DRIVER_FILTER_TAU`); older releases with :data:`OLD_DRIVER_FILTER_TAU`; tau = 0
     passes commands through.  A driver in ``open_loop`` reports this filter's output as the
-    arm's position.
+    arm's position.  The same filter smooths the measured torques it reports
+    (:data:`DRIVER_TORQUE_TAU`).
     """
 
     def __init__(self, tau: float = DRIVER_FILTER_TAU,
@@ -357,9 +358,9 @@ class FirstOrderFilter:
         self.alpha = 1.0 if tau <= 0 else 1.0 - float(np.exp(-period / tau))
         self.value: np.ndarray | None = None
 
-    def reset(self, value: np.ndarray) -> None:
-        """Start from value (the measured position when the driver starts)."""
-        self.value = np.asarray(value, dtype=float).copy()
+    def reset(self, value: np.ndarray | None) -> None:
+        """Start from value (the position when the driver starts; None: the first given)."""
+        self.value = None if value is None else np.asarray(value, dtype=float).copy()
 
     def __call__(self, command: np.ndarray) -> np.ndarray:
         """Return the filtered command of one driver cycle."""

@@ -220,7 +220,7 @@ class SimulatedRobot:
         q = self.engine.q
         self.controller = TrajectoryController(self.settings.period, self.settings.jtc_start)
         self.filter.reset(q)
-        self.torque_filter.value = None      # starts at the first torque it is given
+        self.torque_filter.reset(None)       # starts at the first torque it is given
         if self.limiter is not None:
             self.limiter.reset(q)
         self.commanded = q.copy()             # JTC's last position command
