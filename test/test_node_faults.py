@@ -547,11 +547,16 @@ def test_parameters_that_do_not_go_together_are_refused_when_set(ros, tmp_path):
     for name, value in (('d_dist', 0.35), ('load_com', [0.0, 0.1])):
         result = node.set_parameters([Parameter(name, value=value)])[0]
         assert not result.successful and name in result.reason, result.reason
-    # what start-up built on cannot change under it (the controller checked was the old one)
+    # what start-up built on cannot change under it (the controller checked was the old one;
+    # switched to simulated time, the node's clock read 0 without a /clock, every joint state
+    # looked fresh, and a run went on after its joint states stopped)
     for name, value in (('controller_node', '/lbr/joint_trajectory_controller'),
-                        ('table_height', 0.1), ('trajectory_topic', '/elsewhere')):
+                        ('table_height', 0.1), ('trajectory_topic', '/elsewhere'),
+                        ('use_sim_time', True)):
         result = node.set_parameters([Parameter(name, value=value)])[0]
         assert not result.successful and 'fixed at start-up' in result.reason, name
+    assert not node.get_clock().ros_time_is_active
+    assert node._now() > 1e9        # still the wall clock's date
     Stream(ros)
     wait_for(lambda: ros.call('start').success, 10, 'start with the parameters kept')
 

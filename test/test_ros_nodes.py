@@ -353,15 +353,17 @@ def test_joint_states_that_stop_arriving_stop_the_run(ros, tmp_path):
     assert 'stopped arriving' in ros.status['message']
 
 
+@pytest.mark.parametrize('answer', ['start', 'stop'])
 @pytest.mark.parametrize('desired', [False, True], ids=['measured_start', 'desired_start'])
 def test_after_the_speed_monitoring_stops_the_arm_a_restart_resumes_with_the_map(
-        ros, tmp_path, desired):
+        ros, tmp_path, desired, answer):
     # T1: KUKA's monitoring stops the arm (here at 0.2 m/s, soon on the first path), the
     # driver goes silent and the run stops; the operator restarts the driver, and the next
     # ~/start plans from where the arm holds, with the failures learned before.  The
     # restarted controller holds the measured position, also where JTC starts each command
     # from its last one: the planner must not take the command it sent before the stop for
-    # what JTC holds (its first command went there in one period, 34 x the velocity limit)
+    # what JTC holds (its first command went there in one period, 34 x the velocity limit);
+    # nor must the operator's ~/stop then, which the ended run would have built from it
     jtc = {'interpolate_from_desired_state': desired}
     node = planner(ros, tmp_path, **jtc, controller_node=f'/{MOCK_NODE}')
     fmap = FailureMap(node.arm.task_space)
@@ -381,8 +383,11 @@ def test_after_the_speed_monitoring_stops_the_arm_a_restart_resumes_with_the_map
     assert np.abs(held - START).max() > 0.005       # it had moved before the stop
     sent = len(ros.trajectories)
     arm.robot.command_speed_peak = 0.0
-    wait_for(lambda: ros.call('start').success, 10, 'start after the restart')
-    assert ros.status['failures'] == 1
+    if answer == 'stop':        # the operator's stop, no run active: a hold where the arm is
+        assert ros.call('stop').success
+    else:
+        wait_for(lambda: ros.call('start').success, 10, 'start after the restart')
+        assert ros.status['failures'] == 1
     wait_for(lambda: len(ros.trajectories) > sent, 10, 'the first command after the restart')
     first = ros.trajectories[sent][1].points[0]
     np.testing.assert_allclose(first.positions, held, atol=1e-3)

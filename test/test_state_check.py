@@ -69,6 +69,10 @@ def test_time_going_backwards_and_repeated_or_missing_stamps_are_refused():
     check.check(1.02, NAMES, Q, stamp=100.02)
     with pytest.raises(BadJointStateError, match='time went backwards'):
         check.check(1.0, NAMES, Q, stamp=100.03)
+    # this host's clock stepped back: the states after it start a new stream (refused until
+    # the clock caught up again, a start was refused for as long as the step)
+    check.check(1.01, NAMES, Q, stamp=100.04)
+    assert check.streams == 2 and check.measured_at(1.01, 100.04) == pytest.approx(1.01)
 
 
 def test_a_jump_is_refused_and_a_restarted_stream_is_taken():
@@ -84,6 +88,22 @@ def test_a_jump_is_refused_and_a_restarted_stream_is_taken():
     check.check(1.2, NAMES, fast)
     # after a silence the stream is new: its first state is taken wherever it is
     check.check(1.2 + SILENCE + 0.1, NAMES, old, stamp=5.0)
+
+
+def test_a_forward_step_of_the_hosts_clock_is_refused_and_the_stream_starts_afresh():
+    # the stamps show the arm's states 10 ms apart, this host received them 2 s apart: taken
+    # as a new stream dated now, the run saw its command 2 s ahead of the arm and learned a
+    # failure (a restarted driver's stamps moved on with the silence and are taken)
+    check = gate()
+    check.check(1.0, NAMES, Q, stamp=100.0)
+    with pytest.raises(BadJointStateError,
+                       match=r'arrived 2\.010 s .* stamped 0\.010 s .* clock jumped'):
+        check.check(3.01, NAMES, Q, stamp=100.01)
+    assert check.refused == 1
+    check.check(3.02, NAMES, Q, stamp=100.02)
+    assert check.measured_at(3.02, 100.02) == pytest.approx(3.02)
+    check.check(3.02 + SILENCE + 0.5, NAMES, Q, stamp=100.02 + SILENCE + 0.5)
+    assert check.refused == 1 and check.streams == 3
 
 
 def test_noise_of_0_005_rad_at_1_khz_is_never_refused():

@@ -37,7 +37,10 @@ A joint state is refused, with the reason, when it cannot be the arm's:
   stream's time (it would date the stream ahead, and open the jump check to any step).
 
 After ``SILENCE`` seconds without an accepted state the stream counts as new (a restarted
-driver): stamps and jumps are judged from its first state again.
+driver): stamps and jumps are judged from its first state again.  But where the stamps say
+the stream went on (the state stamped within ``SILENCE`` of the last one), the receiver's
+clock jumped or its process was held up: that state is refused, and the next starts the
+new stream.
 
 An accepted state is dated (:meth:`StateCheck.measured_at`) by its stamp moved onto the
 receiver's clock by the stream's quickest delivery, not by when it arrived: arrival jitters
@@ -263,6 +266,13 @@ class StateCheck:
         """Return the reason of a refusal in the last span seconds before now, else ''."""
         return self.refusal if now - self.refused_at <= span else ''
 
+    def _new_stream(self, now: float) -> None:
+        """Judge the states from now on as a new stream (stamps, jumps, deliveries)."""
+        self.last_q, self.last_stamp, self.last_time = None, 0.0, now
+        self.streams += 1
+        self.last_sequence, self.quickest = 0, np.inf
+        self.span_quickest, self.span_start = np.inf, 0.0
+
     def _check(self, now: float, names: Sequence[str], positions: Sequence[float],
                stamp: float) -> np.ndarray:
         q = positions_by_name(names, positions, self.joint_names)
@@ -274,13 +284,25 @@ class StateCheck:
         q = np.clip(q, self.lower, self.upper)
         if not np.isfinite(now):
             raise BadJointStateError('no receive time')
-        if now - self.last_time > self.silence:
-            self.last_q, self.last_stamp = None, 0.0      # a new stream
-            self.streams += 1
-            self.last_sequence, self.quickest = 0, np.inf
-            self.span_quickest, self.span_start = np.inf, 0.0
         if now < self.last_time:
-            raise BadJointStateError(f'time went backwards by {self.last_time - now:.3f} s')
+            # this host's clock stepped back: refused (a run stops), and the states after it
+            # start a new stream (else each was refused until the clock caught up again)
+            back = self.last_time - now
+            self._new_stream(now)
+            raise BadJointStateError(f'time went backwards by {back:.3f} s')
+        if now - self.last_time > self.silence:
+            # silent on this host's clock; stamped within the silence of the last state, the
+            # stream went on meanwhile: this host's clock jumped, or this process was held
+            # up, and the arm was not where a state dated now says (taken, a run saw its
+            # command seconds ahead of the arm, and learned a failure)
+            stamps = stamp - self.last_stamp if stamp > 0 and self.last_stamp > 0 else None
+            silent = now - self.last_time
+            self._new_stream(now)
+            if stamps is not None and 0 < stamps <= self.silence:
+                raise BadJointStateError(
+                    f'arrived {silent:.3f} s after the joint state before it but '
+                    f"stamped {stamps:.3f} s after it: this host's clock jumped, or this "
+                    f'process was held up (the states after it start a new stream)')
         if self.last_stamp > 0:
             if stamp <= 0:
                 raise BadJointStateError('unstamped after stamped joint states: a second '

@@ -568,9 +568,12 @@ class PlannerNode(Node):
                     Method.for_node(str(param.value))
                 except ValueError as err:
                     return SetParametersResult(successful=False, reason=f'method: {err}')
+            # use_sim_time too: switched during a run, the node's clock would read /clock's
+            # (0 without a simulation) while the run's times are the wall clock's
             if param.name in ('joint_names', 'joint_states_topic', 'trajectory_topic',
                               'orientation', 'table', 'table_height', 'table_clearance',
-                              'object_radius', 'controller_node') and hasattr(self, 'arm'):
+                              'object_radius', 'controller_node', 'use_sim_time') and \
+                    hasattr(self, 'arm'):
                 return SetParametersResult(successful=False,
                                            reason=f'{param.name} is fixed at start-up')
         return SetParametersResult(successful=True)
@@ -932,7 +935,10 @@ class PlannerNode(Node):
             response.success, response.message = True, 'stopped; decelerating to rest'
             return response
         fresh = self._now() - self.measured_at <= self.get_parameter('state_timeout').value
-        if fresh and self.run is not None:       # the ended run knows what JTC runs
+        # the ended run knows what JTC runs, unless the driver was restarted since (a new
+        # joint-state stream): a controller that comes up again holds the measured position,
+        # and a stop from the run's last command would jump the arm back there
+        if fresh and self.run is not None and self.state_check.streams == self.run_stream:
             self._guarded(self.run.stop, 'stopped on request')
         elif fresh:
             settings = self._run_settings()
