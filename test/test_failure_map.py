@@ -142,6 +142,17 @@ def test_save_and_load_round_trip(tmp_path):
     assert [p.name for p in path.parent.iterdir()] == ['map.json']
 
 
+def test_a_map_saved_through_a_symbolic_link_is_written_to_the_file_it_names(tmp_path):
+    # renamed over, the link became a file of its own and the file it named was not written
+    fmap = point_map(([0.0, 0.0], [1.0, 0.0]))
+    target, link = tmp_path / 'maps' / 'arm.json', tmp_path / 'map.json'
+    fmap.save(target)
+    link.symlink_to(target)
+    fmap.add([0.1, 0.0], [0.0, 1.0])
+    fmap.save(link)
+    assert link.is_symlink() and len(FailureMap.load(target)) == 2
+
+
 def test_truncated_file_gives_a_clear_error(tmp_path):
     fmap = point_map(([0.0, 0.0], [1.0, 0.0]), ([0.1, 0.0], [0.0, 1.0]))
     path = tmp_path / 'map.json'
@@ -168,6 +179,9 @@ def test_corrupt_entries_never_give_a_half_loaded_map(tmp_path):
             FailureMap.load(path)
     with pytest.raises(FailureMapError, match='cannot read'):
         FailureMap.load(tmp_path / 'missing.json')
+    path.write_text('[' * 100_000)      # a RecursionError escaped and ended the node
+    with pytest.raises(FailureMapError, match='nested too deeply'):
+        FailureMap.load(path)
 
 
 def test_a_failure_is_added_whole_beside_a_reader_of_the_arrays():
@@ -181,3 +195,7 @@ def test_a_failure_is_added_whole_beside_a_reader_of_the_arrays():
     assert [len(a) for a in seen] == [1, 1, 1]          # a snapshot stays whole
     assert [len(a) for a in fmap.arrays()] == [2, 2, 2]
     assert np.array_equal(fmap.points, fmap.arrays()[0]) and len(fmap) == 2
+    # and so does a copy (the node's markers, built beside the run in another thread)
+    copy = fmap.copy()
+    fmap.add([0.7, 0.1, 0.3], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0, 0.0])
+    assert len(copy) == 2 and len(fmap) == 3 and copy.c_fail == fmap.c_fail

@@ -552,7 +552,7 @@ def test_parameters_that_do_not_go_together_are_refused_when_set(ros, tmp_path):
     # looked fresh, and a run went on after its joint states stopped)
     for name, value in (('controller_node', '/lbr/joint_trajectory_controller'),
                         ('table_height', 0.1), ('trajectory_topic', '/elsewhere'),
-                        ('use_sim_time', True)):
+                        ('use_sim_time', True), ('map_file', str(tmp_path / 'other.json'))):
         result = node.set_parameters([Parameter(name, value=value)])[0]
         assert not result.successful and 'fixed at start-up' in result.reason, name
     assert not node.get_clock().ros_time_is_active

@@ -498,6 +498,23 @@ def test_a_full_run_against_the_physics_mock_learns_and_persists_failures(ros, t
     assert all(node.arm.within_limits(q)[0] for q in ros.positions_commanded())
 
 
+def test_a_finished_run_without_a_bag_keeps_its_map_beside_the_map_file(ros, tmp_path):
+    # with no bag to leave it beside, the finished run's map was emptied and kept nowhere
+    fmap = FailureMap(iiwa_arm().task_space)
+    for k in range(3):
+        fmap.add([0.2 * k, -0.6, 0.3], [0, 0, 1], [1, 0, 0, 0])
+    fmap.save(tmp_path / 'map.json')
+    planner(ros, tmp_path, bag_dir='')
+    mock(ros, free_scenario(tmp_path))
+    wait_for(lambda: ros.call('start').success, 20, 'start')
+    wait_for(lambda: finished(ros), 60, 'the run to end')
+    assert ros.status['state'] == 'succeeded' and not ros.status['bag'], ros.status
+    wait_for(lambda: list(tmp_path.glob('map.json.finished-*')), 5, 'the map kept aside')
+    kept, = tmp_path.glob('map.json.finished-*')
+    assert len(FailureMap.load(kept)) == 3
+    wait_for(lambda: len(FailureMap.load(tmp_path / 'map.json')) == 0, 5, 'the emptied map')
+
+
 def test_stop_during_motion_decelerates_to_rest_within_the_limits(ros, tmp_path):
     planner(ros, tmp_path)
     arm = mock(ros, free_scenario(tmp_path))

@@ -55,7 +55,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 import numpy as np
 from probdis_ros.model import FailureMap, FailureMapError, iiwa_arm
 from probdis_ros.model.arms import DRIVER_LIMIT_INSET
-from probdis_ros.model.failure_map import set_aside, write_document
+from probdis_ros.model.failure_map import aside_path, set_aside, write_document
 from probdis_ros.model.table import ROBOT_TABLE, Table
 from probdis_ros.motion.detector import DetectorSettings, MotionWatch
 from probdis_ros.motion.state_check import BadJointStateError, StateCheck, values_by_name
@@ -569,11 +569,12 @@ class PlannerNode(Node):
                 except ValueError as err:
                     return SetParametersResult(successful=False, reason=f'method: {err}')
             # use_sim_time too: switched during a run, the node's clock would read /clock's
-            # (0 without a simulation) while the run's times are the wall clock's
+            # (0 without a simulation) while the run's times are the wall clock's; and
+            # map_file, read at start-up only: set later, the node's map overwrote that file
             if param.name in ('joint_names', 'joint_states_topic', 'trajectory_topic',
                               'orientation', 'table', 'table_height', 'table_clearance',
-                              'object_radius', 'controller_node', 'use_sim_time') and \
-                    hasattr(self, 'arm'):
+                              'object_radius', 'controller_node', 'use_sim_time',
+                              'map_file') and hasattr(self, 'arm'):
                 return SetParametersResult(successful=False,
                                            reason=f'{param.name} is fixed at start-up')
         return SetParametersResult(successful=True)
@@ -629,6 +630,30 @@ class PlannerNode(Node):
             return done
         return self.io.submit(self._write_map, path, self.fmap.to_dict())
 
+    def _keep_finished_map(self, bag_path: str, doc: dict) -> None:
+        """
+        Keep a finished run's map beside its bag, then empty the map file (I/O thread).
+
+        Without a bag (``bag_dir`` empty, or it could not be opened), or should that copy
+        fail, beside the map file (``<name>.finished-<date>-<time>``): emptied regardless,
+        the map of a run that gave up, the one most wanted, was kept nowhere.
+        """
+        path = self.get_parameter('map_file').value
+        places = [str(Path(bag_path) / 'failure_map.json')] if bag_path else []
+        if path and self.map_writable:
+            places.append(str(aside_path(path, 'finished')))
+        kept = next((place for place in places if self._write_map(place, doc, False)), None)
+        if kept is None:
+            if places:
+                self.get_logger().error("the finished run's map could not be kept beside its "
+                                        'bag or the map file; the map file keeps it until '
+                                        'the next run writes it')
+            return
+        self.get_logger().info(f"the finished run's {len(doc['failures'])} failures are kept "
+                               f'in {kept}; the map starts empty')
+        if path and self.map_writable:
+            self._write_map(path, FailureMap(self.arm.task_space, doc['c_fail']).to_dict())
+
     def _write_map(self, path: str, doc: dict, persist: bool = True) -> bool:
         """Write a map document; a failure is logged and, for map_file, kept in map_error."""
         try:
@@ -645,7 +670,7 @@ class PlannerNode(Node):
 
     def _publish_markers(self, path: np.ndarray | None) -> None:
         """Build and publish the RViz markers in the I/O thread (they take milliseconds)."""
-        fmap = FailureMap.from_dict(self.fmap.to_dict())
+        fmap = self.fmap.copy()         # in O(1): this runs before a block's retreat is sent
         # coloured as the running planner prices the map (Epsilon has no objective)
         objective = getattr(self.run.loop.planner, 'objective', None) if self.run else None
         reach = objective.terms().reach if objective is not None else math.inf
@@ -974,7 +999,7 @@ class PlannerNode(Node):
         if self.active:
             response.success, response.message = False, 'a run is active; call ~/stop first'
             return response
-        count, kept = len(self.fmap), self.fmap.to_dict()
+        count, kept = len(self.fmap), self.fmap.copy()
         self.fmap.clear()
         written = self._save_map()
         # "cleared" means cleared on disk too; if not, nothing changes, in memory either
@@ -985,7 +1010,7 @@ class PlannerNode(Node):
         except FutureTimeout:                # a hung disk: not cleared, and the node lives
             problem = 'the map file was not written within 10 s'
         if problem:
-            self.fmap = FailureMap.from_dict(kept)
+            self.fmap = kept
             response.success, response.message = False, (
                 f'not cleared: {problem}; the map keeps its {count} failures')
         else:
@@ -1082,11 +1107,9 @@ class PlannerNode(Node):
         if self.recorder is not None:
             self.recorder_close_at = self._now() + 0.5
         if self.run.outcome in ('succeeded', 'gave_up'):
-            if self.bag_path:
-                self.io.submit(self._write_map, str(Path(self.bag_path) / 'failure_map.json'),
-                               self.fmap.to_dict(), False)
+            finished = self.fmap.to_dict()
             self.fmap = FailureMap(self.arm.task_space, self.fmap.c_fail)
-            self._save_map()
+            self.io.submit(self._keep_finished_map, self.bag_path, finished)
 
     def _tick(self) -> None:
         self._note_stall()
