@@ -32,7 +32,7 @@ from probdis_ros.model.arms import TaskSpace
 from probdis_ros.ros.bag_source import Bag
 from probdis_ros.ros.messages import duration
 from probdis_ros.ros.mock_iiwa_node import MockIiwa
-from probdis_ros.ros.planner_node import CLOCK_STALL
+from probdis_ros.ros.planner_node import CLOCK_STALL, PlannerNode
 from probdis_ros.ros.recorder import FLUSH_INTERVAL
 import pytest
 import rclpy
@@ -689,6 +689,18 @@ def test_a_second_planner_of_the_same_name_refuses_to_start(ros, tmp_path):
     # the first lives on, alone again
     wait_for(lambda: ros.call('start').success, 10, 'a start of the first')
     assert first.active
+
+
+def test_a_planner_of_another_namespace_on_the_same_map_file_refuses_to_start(ros, tmp_path):
+    # each wrote its own whole map over the other's, and the failures of one were lost
+    planner(ros, tmp_path)
+    with pytest.raises(ValueError, match=r'map.json is in use: /probdis_planner uses it '
+                                         r'\(pid \d+ on .*\); give each arm its own map_file'):
+        PlannerNode(context=ros.context, namespace='cell_b', parameter_overrides=[
+            Parameter('map_file', value=str(tmp_path / 'map.json'))])
+    other = PlannerNode(context=ros.context, namespace='cell_c', parameter_overrides=[
+        Parameter('map_file', value=str(tmp_path / 'other.json'))])
+    other.destroy_node()
 
 
 def test_a_bag_name_taken_by_another_recorder_meanwhile_is_not_a_crash(

@@ -35,6 +35,7 @@ File format (JSON, written atomically; see README "Failure map files")::
 
 from __future__ import annotations
 
+import fcntl
 import json
 import math
 import os
@@ -99,6 +100,43 @@ def set_aside(path: str | Path, why: str) -> Path:
     copy = aside_path(path, why)
     shutil.copyfile(path, copy)
     return copy
+
+
+class MapInUseError(RuntimeError):
+    """Another process holds a map file's lock; ``holder`` is what it wrote there."""
+
+    def __init__(self, path: Path, holder: dict) -> None:
+        super().__init__(f'{path} is in use by {holder or "another process"}')
+        self.path, self.holder = path, holder
+
+
+def lock_map(path: str | Path, holder: dict) -> int:
+    """
+    Take a map file's lock (``<name>.lock`` beside it) for as long as the descriptor is open.
+
+    Two planners writing one map each write their own whole, and the last write wins: the
+    other's failures were lost without a word.  The lock file says who holds it
+    (``holder``, JSON); MapInUseError, with what the holder wrote, if another process holds
+    it.  OSError where no lock file can be made (the map is not writable there either).
+    """
+    lock = Path(path).resolve().with_name(Path(path).resolve().name + '.lock')
+    lock.parent.mkdir(parents=True, exist_ok=True)
+    fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o600)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        try:
+            other = json.loads(os.read(fd, 4096).decode('utf-8', errors='replace') or '{}')
+        except ValueError:
+            other = {}
+        os.close(fd)
+        raise MapInUseError(Path(path), other if isinstance(other, dict) else {}) from None
+    except OSError:
+        os.close(fd)
+        raise
+    os.ftruncate(fd, 0)
+    os.pwrite(fd, json.dumps(holder).encode(), 0)
+    return fd
 
 
 def aside_path(path: str | Path, why: str) -> Path:

@@ -55,7 +55,13 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 import numpy as np
 from probdis_ros.model import FailureMap, FailureMapError, iiwa_arm
 from probdis_ros.model.arms import DRIVER_LIMIT_INSET
-from probdis_ros.model.failure_map import aside_path, set_aside, write_document
+from probdis_ros.model.failure_map import (
+    aside_path,
+    lock_map,
+    MapInUseError,
+    set_aside,
+    write_document,
+)
 from probdis_ros.model.table import ROBOT_TABLE, Table
 from probdis_ros.motion.detector import DetectorSettings, MotionWatch
 from probdis_ros.motion.state_check import BadJointStateError, StateCheck, values_by_name
@@ -337,6 +343,7 @@ class PlannerNode(Node):
         self.map_error = ''                    # set by the I/O thread
         self.refusing = ''                     # joint states are being refused: the first why
         self.map_writable = True
+        self.map_lock = self._lock_map()
         self.fmap = self._load_map()
         self.get_logger().info(
             f'planner kernels ready in {time.perf_counter() - compiling:.1f} s')
@@ -580,6 +587,32 @@ class PlannerNode(Node):
         return SetParametersResult(successful=True)
 
     # -- the failure map ---------------------------------------------------------------
+
+    def _lock_map(self) -> int | None:
+        """
+        Hold map_file's lock for the node's life; raise ValueError (exit 2) if another holds it.
+
+        Two planners in other namespaces or ROS domains share the default map_file: each
+        wrote its own map over the other's.  Where no lock file can be made, the map is not
+        writable there either: said at its first write.
+        """
+        path = self.get_parameter('map_file').value
+        if not path:
+            return None
+        me = {'node': self.get_fully_qualified_name(), 'pid': os.getpid(),
+              'host': socket.gethostname()}
+        try:
+            return lock_map(path, me)
+        except OSError:
+            return None
+        except MapInUseError as err:
+            other = err.holder
+            Node.destroy_node(self)
+            who = (f'another node named {other.get("node")} is running'
+                   if other.get('node') == me['node'] else f'{other.get("node", "a planner")} '
+                   f'uses it') + f' (pid {other.get("pid")} on {other.get("host")})'
+            raise ValueError(f'map_file {path} is in use: {who}; give each arm its own '
+                             f'map_file; not starting a second one') from None
 
     def _load_map(self) -> FailureMap:
         """
@@ -1290,6 +1323,9 @@ class PlannerNode(Node):
         if self.run is not None and self.run.active:
             self.run.loop.planner.cancel()
         self.io.shutdown(wait=True)     # the last map write finishes
+        if getattr(self, 'map_lock', None) is not None:
+            os.close(self.map_lock)
+            self.map_lock = None
         super().destroy_node()
 
 
