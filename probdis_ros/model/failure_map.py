@@ -67,7 +67,7 @@ def write_atomically(path: str | Path, text: str, private: bool = True) -> None:
     """
     Write a text file so that a crash leaves the old file or the new one, never half.
 
-    A temporary file beside it, fsync, rename.  ``private``: readable by its owner alone
+    A temporary file beside it, fsync, rename, fsync of the folder.  ``private``: readable by its owner alone
     (the map files); else with the permissions of any new file (the umask's).  A symbolic
     link is written through (renamed over, the link became a file of its own, and the file
     it named was no longer written).
@@ -89,6 +89,11 @@ def write_atomically(path: str | Path, text: str, private: bool = True) -> None:
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+    folder = os.open(path.parent, os.O_RDONLY)
+    try:                # the rename itself to disk: a power cut could undo it before
+        os.fsync(folder)
+    finally:
+        os.close(folder)
 
 
 def set_aside(path: str | Path, why: str) -> Path:
