@@ -35,6 +35,7 @@ from probdis_ros.ros.messages import trajectory_msg
 from probdis_ros.ros.mock_iiwa_node import MockIiwa
 from probdis_ros.ros.planner_node import PlannerNode
 from probdis_ros.ros.replay import replay
+from probdis_ros.run import Learned
 from probdis_ros.sim.worlds import load_world
 import pytest
 from rclpy.parameter import Parameter
@@ -794,11 +795,15 @@ def test_a_fault_inside_the_run_stops_the_arm_and_the_node_lives_on(ros, tmp_pat
     steady_states(ros)
     wait_for(lambda: ros.call('start').success, 10, 'start')
 
-    def broken(*args):
+    def broken(*args):          # after a failure was learned: it is kept all the same
+        run = node.run
+        run.loop.learn(START, np.eye(7)[0])
+        run.actions.append(Learned({'t': 0.0, 'x': run.loop.fmap.points[-1].tolist()}))
         raise ValueError('injected fault')
     node.run.on_joint_state = broken
     wait_for(lambda: finished(ros), 5, 'the run to stop')
     assert ros.status['state'] == 'stopped' and 'internal error' in ros.status['message']
+    wait_for(lambda: len(FailureMap.load(tmp_path / 'map.json')) == 1, 5, 'the map saved')
     last = ros.trajectories[-1][1]        # the stop: at most where the command had begun
     assert np.allclose(last.points[-1].positions, START, atol=1e-3) and \
         np.allclose(last.points[-1].velocities, 0.0)

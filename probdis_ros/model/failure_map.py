@@ -67,10 +67,10 @@ def write_atomically(path: str | Path, text: str, private: bool = True) -> None:
     """
     Write a text file so that a crash leaves the old file or the new one, never half.
 
-    A temporary file beside it, fsync, rename, fsync of the folder.  ``private``: readable by its owner alone
-    (the map files); else with the permissions of any new file (the umask's).  A symbolic
-    link is written through (renamed over, the link became a file of its own, and the file
-    it named was no longer written).
+    A temporary file beside it, fsync, rename, fsync of the folder.  ``private``: readable
+    by its owner alone (the map files); else with the permissions of any new file (the
+    umask's).  A symbolic link is written through (renamed over, the link became a file of
+    its own, and the file it named was no longer written).
     """
     path = Path(path).resolve()
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -1256,7 +1256,9 @@ class PlannerNode(Node):
             event(*args)
         except Exception as err:        # the arm must never be left moving unsupervised
             self.get_logger().error(f'run failed: {err!r}; stopping the arm')
-            self.run.actions.clear()
+            # nothing half made is sent; but a failure learned before the error is kept (it
+            # is in the map already: written only at the next failure, or never)
+            self.run.actions[:] = [a for a in self.run.actions if isinstance(a, Learned)]
             self.run.finish(State.STOPPED, f'internal error: {err}')
         self._act()
 
