@@ -378,6 +378,7 @@ class Run:
         self.rest_at: np.ndarray | None = None           # where the arm came to rest
         self.rest_slack = 0.0      # how far it may still settle from there [rad L1]
         self.pressed = False                             # the last motion ended blocked
+        self.blocked_still = False                       # ... without having moved the arm
         self._recent: deque[tuple[float, np.ndarray]] = deque()     # (time, measured)
         self.latencies: list[float] = []
         # per joint, the largest external torque estimated (torque_observer) while the run
@@ -467,6 +468,13 @@ class Run:
             return
         detector, self.detector = self.detector, None
         self.rest_at = self.measured.copy()
+        moved, allowance = detector.moved()
+        # blocked twice running without the arm moving at all: a retreat that never moves is
+        # blocked (the arm pressed from behind too), and the path after it begins pressed, so
+        # neither can be told "not executed"; with a controller that stopped executing after
+        # a block, every retreat and path was learned, a failure every 0.5 s until max_paths
+        still_again = verdict is Verdict.BLOCKED and moved <= allowance and self.blocked_still
+        self.blocked_still = verdict is Verdict.BLOCKED and moved <= allowance
         self.pressed = verdict is Verdict.BLOCKED
         if self.pressed and velocity is None:
             # blocked: held, or still moving (a torque ceiling tripped by a soft contact), which
@@ -481,6 +489,12 @@ class Run:
         self.rest_slack = detector.gap if self.pressed else 0.0
         if verdict is Verdict.ECHO:
             self.finish(State.STOPPED, ECHO_MESSAGE)
+        elif still_again:
+            self.finish(State.STOPPED, f'{detector.reason}: the arm has moved under neither this '
+                                       f'command nor the one before, both blocked: nothing '
+                                       f'executes the commands (is the controller active?) or '
+                                       f'something holds the arm on every side; stopped, this '
+                                       f'one not learned')
         elif verdict is Verdict.NOT_EXECUTED:
             self.finish(State.STOPPED, f'{detector.reason}: nothing executes the commands (is '
                                        f'the controller active?) or something holds the arm; '

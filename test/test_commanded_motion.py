@@ -44,6 +44,7 @@ from probdis_ros.planning.disentangle import Disentangler
 from probdis_ros.run import (
     Learned,
     MAX_VELOCITY_SCALING,
+    PlanFrom,
     Run,
     RunSettings,
     Send,
@@ -334,6 +335,35 @@ def test_a_path_the_arm_never_follows_stops_the_run_and_learns_nothing():
             break
     assert run.outcome == 'stopped' and 'nothing executes the commands' in run.message
     assert not learned(run) and len(run.loop.fmap) == 0
+
+
+def test_a_controller_that_stops_executing_after_a_block_is_not_learned_again_and_again():
+    # a real block, then nothing executes the commands (JTC switched off) while the joint
+    # states go on: the retreat that never moves is blocked (as an arm pressed from behind
+    # too) and learned, the path after it begins pressed; each was learned in turn, a
+    # failure every 0.5 s until max_paths.  Two blocked commands in a row that never moved
+    # the arm stop the run
+    run = run_from()
+    run.on_plan(run.loop.next_path(Q0))
+    run.actions.clear()
+    held, t = None, 0.0
+    while run.active and t < 20.0:
+        t += 0.01
+        if held is None:
+            jtc = run.trajectory
+            q = jtc.sample(t - jtc.taken_at - 0.05)[0]
+            if t >= 0.6:                    # blocked here; from now on nothing moves the arm
+                held = q
+        run.on_joint_state(t, q if held is None else held)
+        for action in run.actions:
+            if isinstance(action, PlanFrom):
+                run.on_plan(run.loop.next_path(action.config))
+        run.actions.clear()
+        run.tick(t)
+    assert run.outcome == 'stopped' and 'moved under neither' in run.message, run.message
+    assert 'nothing executes the commands' in run.message
+    assert len(run.loop.fmap) == 2 and t < 3.0      # the block and the retreat's
+    assert run.loop.paths_tried == 2
 
 
 def test_an_arm_moving_while_it_should_rest_stops_the_run_and_learns_nothing():
