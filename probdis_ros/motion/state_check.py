@@ -38,9 +38,9 @@ A joint state is refused, with the reason, when it cannot be the arm's:
 
 After ``SILENCE`` seconds without an accepted state the stream counts as new (a restarted
 driver): stamps and jumps are judged from its first state again.  But where the stamps say
-the stream went on (the state stamped within ``SILENCE`` of the last one), the receiver's
-clock jumped or its process was held up: that state is refused, and the next starts the
-new stream.
+the stream went on (the state stamped within ``SILENCE`` of the last one, and received later
+by more than ``late``, else half the silence), the receiver's clock jumped or its process
+was held up: that state is refused, and the next starts the new stream.
 
 An accepted state is dated (:meth:`StateCheck.measured_at`) by its stamp moved onto the
 receiver's clock by the stream's quickest delivery, not by when it arrived: arrival jitters
@@ -291,14 +291,16 @@ class StateCheck:
             self._new_stream(now)
             raise BadJointStateError(f'time went backwards by {back:.3f} s')
         if now - self.last_time > self.silence:
-            # silent on this host's clock; stamped within the silence of the last state, the
-            # stream went on meanwhile: this host's clock jumped, or this process was held
+            # silent on this host's clock; stamped within the silence of the last state, and
+            # received later by more than a stale state is (``late``, else half the silence):
+            # the stream went on meanwhile, this host's clock jumped or this process was held
             # up, and the arm was not where a state dated now says (taken, a run saw its
             # command seconds ahead of the arm, and learned a failure)
             stamps = stamp - self.last_stamp if stamp > 0 and self.last_stamp > 0 else None
             silent = now - self.last_time
             self._new_stream(now)
-            if stamps is not None and 0 < stamps <= self.silence:
+            later = self.late if self.late is not None else 0.5 * self.silence
+            if stamps is not None and 0 < stamps <= self.silence and silent - stamps > later:
                 raise BadJointStateError(
                     f'arrived {silent:.3f} s after the joint state before it but '
                     f"stamped {stamps:.3f} s after it: this host's clock jumped, or this "
