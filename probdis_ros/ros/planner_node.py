@@ -682,8 +682,9 @@ class PlannerNode(Node):
                                         'bag or the map file; the map file keeps it until '
                                         'the next run writes it')
             return
-        self.get_logger().info(f"the finished run's {len(doc['failures'])} failures are kept "
-                               f'in {kept}; the map starts empty')
+        count = len(doc['failures'])
+        self.get_logger().info(f"the finished run's {count} failure{'' if count == 1 else 's'} "
+                               f'kept in {kept}; the map starts empty')
         if path and self.map_writable:
             self._write_map(path, FailureMap(self.arm.task_space, doc['c_fail']).to_dict())
 
