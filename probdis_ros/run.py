@@ -468,13 +468,13 @@ class Run:
             return
         detector, self.detector = self.detector, None
         self.rest_at = self.measured.copy()
-        moved, allowance = detector.moved()
         # blocked twice running without the arm moving at all: a retreat that never moves is
         # blocked (the arm pressed from behind too), and the path after it begins pressed, so
         # neither can be told "not executed"; with a controller that stopped executing after
         # a block, every retreat and path was learned, a failure every 0.5 s until max_paths
-        still_again = verdict is Verdict.BLOCKED and moved <= allowance and self.blocked_still
-        self.blocked_still = verdict is Verdict.BLOCKED and moved <= allowance
+        moved, allowance = detector.moved()
+        still = verdict is Verdict.BLOCKED and moved <= allowance
+        still_again, self.blocked_still = still and self.blocked_still, still
         self.pressed = verdict is Verdict.BLOCKED
         if self.pressed and velocity is None:
             # blocked: held, or still moving (a torque ceiling tripped by a soft contact), which

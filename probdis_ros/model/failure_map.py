@@ -124,7 +124,8 @@ def lock_map(path: str | Path, holder: dict) -> int:
     (``holder``, JSON); MapInUseError, with what the holder wrote, if another process holds
     it.  OSError where no lock file can be made (the map is not writable there either).
     """
-    lock = Path(path).resolve().with_name(Path(path).resolve().name + '.lock')
+    target = Path(path).resolve()
+    lock = target.with_name(target.name + '.lock')
     lock.parent.mkdir(parents=True, exist_ok=True)
     fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o600)
     try:

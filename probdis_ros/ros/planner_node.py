@@ -849,7 +849,7 @@ class PlannerNode(Node):
         # holds it and starts the next command from it.  Unless the joint states went silent
         # since that run began (a new stream): the driver was restarted (after a safety stop,
         # say), and a controller that comes up again holds the measured position
-        same_driver = self.state_check.streams == self.run_stream
+        same_driver = self._same_driver()
         keep = self.run is not None and same_driver and (own or settings.jtc_start == 'desired')
         running = self.run.trajectory if keep else None
         running_sent_at = self.run.sent_at if keep else None
@@ -982,6 +982,10 @@ class PlannerNode(Node):
                                  self.get_parameter('epsilon').value)
         return method.planner(self.arm, settings, self.get_parameter('length_weight').value)
 
+    def _same_driver(self) -> bool:
+        """Tell whether the joint states are still the stream the last run began on."""
+        return self.state_check.streams == self.run_stream
+
     def _on_stop(self, request, response):
         """
         Stop the run and its planning; the arm decelerates to rest, whatever it was doing.
@@ -997,7 +1001,7 @@ class PlannerNode(Node):
         # the ended run knows what JTC runs, unless the driver was restarted since (a new
         # joint-state stream): a controller that comes up again holds the measured position,
         # and a stop from the run's last command would jump the arm back there
-        if fresh and self.run is not None and self.state_check.streams == self.run_stream:
+        if fresh and self.run is not None and self._same_driver():
             self._guarded(self.run.stop, 'stopped on request')
         elif fresh:
             settings = self._run_settings()
