@@ -18,8 +18,10 @@
 import numpy as np
 from probdis_ros.motion.jtc import (
     CommandLimiter,
+    ends_in_the_past,
     FirstOrderFilter,
     JtcTrajectory,
+    moved_onto_clock,
     TrajectoryCommand,
     TrajectoryController,
 )
@@ -134,6 +136,25 @@ def test_a_stamped_message_that_ends_before_it_is_taken_is_dropped_as_jtc_does()
     jtc.receive(one_joint([1.0], [0.2], stamp=1.2))            # due at 2.2: taken
     assert jtc.update(1.6, np.array([0.5])) != pytest.approx([0.61])
     assert jtc.update(3.0, np.array([0.2])) == pytest.approx([0.2])
+
+
+def test_a_stamp_moved_onto_a_clock_that_began_later_stays_a_stamp():
+    # the mock's arm and a replay count from their own start, and a stamp of 0 is none: a
+    # message dated 10 s before that start ran as if taken now (JTC refuses it: it ends in
+    # the past), and one dated 0.5 s before ran late by 0.5 s
+    two_seconds = one_joint([1.0, 2.0], [1.0, 3.0], [1.0, 0.0], [0.0, 0.0], stamp=100.0)
+    assert moved_onto_clock(two_seconds, -110.0) is None
+    assert moved_onto_clock(two_seconds, -90.0).stamp == pytest.approx(10.0)
+    assert moved_onto_clock(one_joint([1.0], [1.0]), -110.0).stamp == 0.0    # unstamped
+    for before in (0.5, 1.5):           # the zero before the first point, then on a segment
+        moved = moved_onto_clock(two_seconds, -100.0 - before)
+        assert 0 < moved.stamp <= 1e-9 and not ends_in_the_past(moved, 0.3)
+        taken = JtcTrajectory(moved, np.zeros(1), np.zeros(1), 0.3)
+        whole = JtcTrajectory(two_seconds, np.zeros(1), np.zeros(1), 100.0 + before + 0.3)
+        for t in (0.0, 0.1, 0.45, 1.0, 3.0):
+            for mine, jtcs in zip(taken.sample(t), whole.sample(t)):
+                assert mine == pytest.approx(jtcs, abs=1e-7)
+    assert len(moved_onto_clock(two_seconds, -101.5).times) == 2    # the first point gone
 
 
 def test_refuses_times_that_do_not_increase_and_shapes_that_do_not_match():

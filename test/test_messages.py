@@ -36,13 +36,14 @@ def test_a_command_goes_through_its_message_unchanged_point_by_point():
     positions = rng.uniform(arm.lower, arm.upper, size=(n, 7))
     velocities = rng.normal(size=(n, 7))
     velocities[5] = np.nan                     # a point that carries no velocities
+    velocities[-1] = 0.0                       # JTC takes only a trajectory ending at rest
     command = TrajectoryCommand(times, positions, velocities, None)
     msg = trajectory_msg(command, JOINTS)
     assert msg.joint_names == JOINTS and len(msg.points) == n
     assert all(point.time_from_start == duration(t) for point, t in zip(msg.points, times))
     assert len(msg.points[5].velocities) == 0 and len(msg.points[6].velocities) == 7
     assert all(len(point.accelerations) == 0 for point in msg.points)
-    back = command_from_msg(msg, JOINTS, arm.lower, arm.upper)
+    back = command_from_msg(msg, JOINTS)
     assert np.array_equal(back.positions, positions)
     assert np.allclose(back.times, times, rtol=0, atol=1e-9)
     assert np.array_equal(back.velocities, velocities, equal_nan=True)
@@ -50,7 +51,7 @@ def test_a_command_goes_through_its_message_unchanged_point_by_point():
     assert back.stamp == 0.0 and msg.header.stamp.sec == 0 == msg.header.stamp.nanosec
     # a desired start stamps its commands: JTC runs them on its own time line from then
     stamped = command_from_msg(trajectory_msg(replace(command, stamp=1796369963.125), JOINTS),
-                               JOINTS, arm.lower, arm.upper)
+                               JOINTS)
     assert abs(stamped.stamp - 1796369963.125) < 1e-6
 
 
@@ -60,8 +61,8 @@ def test_a_position_at_a_limit_is_sent_within_the_drivers_limits():
     arm = iiwa_arm()
     positions = np.array([arm.upper, arm.lower, (arm.lower + arm.upper) / 2 + 0.1])
     command = TrajectoryCommand(np.array([0.1, 0.2, 0.3]), positions)
-    sent = command_from_msg(trajectory_msg(command, JOINTS, arm.lower, arm.upper), JOINTS,
-                            arm.lower, arm.upper).positions
+    sent = command_from_msg(trajectory_msg(command, JOINTS, arm.lower, arm.upper),
+                            JOINTS).positions
     driver = math.radians(170.0)
     assert sent[0, 0] <= driver and sent[0, 2] <= driver and sent[0, 4] <= driver
     assert sent[1, 0] >= -driver and sent[1, 4] >= -driver
@@ -75,9 +76,11 @@ def five_points():
     arm = iiwa_arm()
     rng = np.random.default_rng(5)
     positions = rng.uniform(arm.lower, arm.upper, size=(5, 7))
-    command = TrajectoryCommand(np.arange(1, 6) * 0.1, positions, rng.normal(size=(5, 7)),
+    velocities = rng.normal(size=(5, 7))
+    velocities[-1] = 0.0
+    command = TrajectoryCommand(np.arange(1, 6) * 0.1, positions, velocities,
                                 rng.normal(size=(5, 7)))
-    return arm, trajectory_msg(command, JOINTS)
+    return trajectory_msg(command, JOINTS)
 
 
 def bad(k, name, values):
@@ -92,36 +95,52 @@ NAN7 = [math.nan] * 7
     ([bad(3, 'positions', [0.0] * 6), bad(1, 'velocities', NAN7)],
      'point 1 has non-finite velocities'),
     ([bad(2, 'velocities', [0.0] * 3), bad(2, 'positions', NAN7)], 'point 2 is not finite'),
-    ([bad(4, 'accelerations', [0.0] * 8), bad(2, 'positions', [3.0] * 7)],
-     'point 2 is outside the joint limits'),
+    ([bad(4, 'accelerations', [0.0] * 8), bad(2, 'effort', [0.0] * 3)],
+     'point 2 has efforts for other than 7 joints'),
+    ([bad(4, 'velocities', [0.0] * 6 + [0.5])],
+     'the last point still moves (lbr_A7 at 0.5 rad/s): JTC takes only a trajectory that ends '
+     'at rest'),
+    ([bad(4, 'velocities', [0.0] * 6 + [1e-7])], None),      # within a float's epsilon
+    ([bad(2, 'positions', [3.0] * 7)], None),   # beyond the limits: JTC passes, the driver clamps
     ([bad(4, 'accelerations', [0.0] * 8)], 'point 4 has 8 accelerations for 7 joints'),
     ([bad(3, 'accelerations', [math.inf] * 7), bad(3, 'velocities', [0.0] * 2)],
      'point 3 has 2 velocities for 7 joints'),
 ])
-def test_a_command_is_refused_for_its_first_points_first_problem(changes, reason):
-    arm, msg = five_points()
+def test_a_command_is_refused_as_jtc_refuses_it_for_its_first_problem(changes, reason):
+    msg = five_points()
     for change in changes:
         change(msg)
+    if reason is None:
+        assert command_from_msg(msg, JOINTS).positions.shape == (5, 7)
+        return
     with pytest.raises(ValueError) as refused:
-        command_from_msg(msg, JOINTS, arm.lower, arm.upper)
+        command_from_msg(msg, JOINTS)
     assert str(refused.value) == reason
 
 
-def test_joints_are_taken_by_name_and_others_ignored():
-    arm, msg = five_points()
-    expected = command_from_msg(msg, JOINTS, arm.lower, arm.upper)
+def test_joints_are_taken_by_name_in_any_order_and_no_others():
+    msg = five_points()
+    expected = command_from_msg(msg, JOINTS)
     order = [6, 0, 5, 1, 4, 2, 3]
-    msg.joint_names = [JOINTS[j] for j in order] + ['gripper']
+    msg.joint_names = [JOINTS[j] for j in order]
     for point in msg.points:
         for name in ('positions', 'velocities', 'accelerations'):
             values = list(getattr(point, name))
-            setattr(point, name, [values[j] for j in order] + [math.nan])
+            setattr(point, name, [values[j] for j in order])
     msg.points[2].velocities = []                  # a point without velocities
-    back = command_from_msg(msg, JOINTS, arm.lower, arm.upper)
+    back = command_from_msg(msg, JOINTS)
     assert np.array_equal(back.positions, expected.positions)
     assert np.isnan(back.velocities[2]).all()
     assert np.array_equal(np.delete(back.velocities, 2, axis=0),
                           np.delete(expected.velocities, 2, axis=0))
     with pytest.raises(ValueError, match='lacks joints lbr_A7'):
         msg.joint_names = ['other', *msg.joint_names[1:]]       # lbr_A7 was first
-        command_from_msg(msg, JOINTS, arm.lower, arm.upper)
+        command_from_msg(msg, JOINTS)
+    # JTC (allow_partial_joints_goal off) refuses joints beyond its own: a gripper's too
+    msg.joint_names = [*JOINTS, 'gripper']
+    for point in msg.points:
+        for name in ('positions', 'velocities', 'accelerations'):
+            if len(getattr(point, name)):
+                setattr(point, name, [*getattr(point, name), 0.0])
+    with pytest.raises(ValueError, match=r"names 8 joints for the controller's 7 \(gripper"):
+        command_from_msg(msg, JOINTS)

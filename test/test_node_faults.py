@@ -875,6 +875,18 @@ def test_on_simulated_time_a_block_is_detected_on_the_simulated_clock(ros, tmp_p
     ros.call('stop')
 
 
+def test_on_simulated_time_a_driver_stopped_by_the_monitoring_still_stops_the_run(ros, tmp_path):
+    # the mock published /clock only with its joint states: a driver stopped by KUKA's
+    # speed monitoring stopped simulated time too, and the planner waited for states on a
+    # clock that never moved (the run went on 'executing' for ever); time goes on
+    planner(ros, tmp_path, use_sim_time=True, state_timeout=0.5)
+    arm = mock(ros, free_scenario(tmp_path), sim_time=True, speed_monitor=0.2)
+    wait_for(lambda: ros.call('start').success, 20, 'start')
+    wait_for(lambda: arm.robot.stopped is not None, 20, 'the monitoring to stop the arm')
+    wait_for(lambda: finished(ros), 10, 'the run to stop')
+    assert ros.status['state'] == 'stopped' and 'stopped arriving' in ros.status['message']
+
+
 def test_on_simulated_time_the_clock_never_reads_before_a_joint_state_taken(ros, tmp_path):
     # a busy executor gets to /clock late, as to the states: a command timed by the old
     # /clock began, for the detector and the recording, before a state already taken (a

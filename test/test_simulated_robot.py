@@ -24,6 +24,7 @@ from probdis_ros.motion.jtc import (
     DRIVER_TORQUE_TAU,
     FirstOrderFilter,
     JtcTrajectory,
+    TrajectoryCommand,
 )
 from probdis_ros.motion.timing import time_path
 from probdis_ros.physics import load_scene, measure
@@ -310,6 +311,24 @@ def test_a_driver_stopped_while_the_arm_presses_on_something_cannot_be_restarted
     with pytest.raises(RuntimeError, match='refuses joint impedance: an external torque'):
         robot.restart()
     assert robot.stopped is not None
+
+
+@pytest.mark.parametrize('engine', ['kinematic', 'physics'])
+def test_a_command_whose_spline_overflows_is_held_not_a_crash(engine):
+    # a finite velocity of 1e308 passes every check and JTC's spline overflows to NaN: the
+    # mock raised and its node died, where the driver takes no such target and holds
+    robot, _ = build_robot(engine, 'demo_iiwa' if engine == 'kinematic' else free_scene(),
+                           RobotSettings())
+    held = robot.joint_state().position.copy()
+    velocities = np.zeros((2, 7))
+    velocities[0, 0] = 1e308
+    with np.errstate(over='ignore', invalid='ignore'):
+        robot.command(TrajectoryCommand(np.array([0.5, 1.0]), np.vstack([held, held]),
+                                        velocities))
+        for _ in range(120):
+            robot.step()
+    assert np.all(np.isfinite(robot.commanded)) and robot.stopped is None
+    np.testing.assert_allclose(robot.joint_state().position, held, atol=0.01)
 
 
 def test_the_command_guard_stops_the_driver_on_a_command_past_a_limit():

@@ -49,7 +49,7 @@ true`` starts from the last command as well (JTC ORs the two).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 import math
 
 import numpy as np
@@ -255,6 +255,45 @@ def taken_trajectory(command: TrajectoryCommand, now: float, q_measured: np.ndar
         return JtcTrajectory(command, q_measured, v_measured, now)
     q, v, a = last_command
     return JtcTrajectory(command, q, v, now, a, -period)
+
+
+# where a stamp moved to or before another clock's zero lands: just after it (0 is no stamp)
+EARLIEST_STAMP = 1e-9
+
+
+def moved_onto_clock(command: TrajectoryCommand, shift: float) -> TrajectoryCommand | None:
+    """
+    Return a stamped command on another clock, its stamp moved by shift (unstamped: as is).
+
+    The mock's arm and a replay count time from their own start, where a stamp of 0 means
+    none (JTC starts such a message when it takes it): a message dated at or before that
+    zero stays dated, a nanosecond after it, and its points move instead; those before the
+    zero are dropped and the segment that runs across it starts there, at the spline's own
+    state then (the same spline: JTC interpolates a segment from its two ends' fields).
+    None where the message ends before the zero: JTC would refuse it as ending in the past.
+    """
+    if command.stamp <= 0:
+        return command
+    stamp = command.stamp + shift
+    if stamp > 0:
+        return replace(command, stamp=stamp)
+    times = command.times + stamp - EARLIEST_STAMP
+    k = int(np.searchsorted(times, 0.0, side='right'))
+    if k == len(times):
+        return None
+    if k == 0:
+        return replace(command, stamp=EARLIEST_STAMP, times=times)
+    cut = JtcTrajectory(replace(command, stamp=0.0), command.positions[0]).sample(
+        command.times[k - 1] - times[k - 1])
+    rows = []
+    for field, value in zip(('positions', 'velocities', 'accelerations'), cut):
+        given = getattr(command, field)
+        if given is None:
+            rows.append(None)
+            continue
+        carried = field == 'positions' or not np.isnan(given[k - 1:k + 1]).any()
+        rows.append(np.vstack([value if carried else np.full_like(value, np.nan), given[k:]]))
+    return TrajectoryCommand(np.concatenate([[0.0], times[k:]]), *rows, stamp=EARLIEST_STAMP)
 
 
 def ends_in_the_past(command: TrajectoryCommand, now: float) -> bool:

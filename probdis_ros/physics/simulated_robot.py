@@ -283,6 +283,10 @@ class SimulatedRobot:
         previous = self.commanded
         self.commanded = self.controller.update(self.engine.time, state.position,
                                                 state.velocity)
+        if not np.all(np.isfinite(self.commanded)):
+            # a spline that overflowed (a finite but absurd velocity in the message): the
+            # driver takes no target that is not a number, it holds its last
+            self.commanded = previous
         self._sent_before = self.filter.value.copy()
         before = self.engine.q.copy()
         limited = self.commanded if self.limiter is None else self.limiter(self.commanded)

@@ -38,6 +38,9 @@ from probdis_ros.motion.state_check import (  # noqa: F401 (BadJointStateError: 
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
+# JTC's test of a last point at rest: |velocity| above a float's epsilon moves
+FLOAT_EPSILON = float(np.finfo(np.float32).eps)
+
 
 def joint_positions(msg: JointState, joint_names: list[str]) -> np.ndarray:
     """Return the positions of joint_names from msg, or raise BadJointStateError."""
@@ -106,16 +109,19 @@ def trajectory_msg(command: TrajectoryCommand, joint_names: list[str],
     return msg
 
 
-def command_from_msg(msg: JointTrajectory, joint_names: list[str], lower: np.ndarray,
-                     upper: np.ndarray) -> TrajectoryCommand:
+def command_from_msg(msg: JointTrajectory, joint_names: list[str]) -> TrajectoryCommand:
     """
     Return what a trajectory command asks JTC for, in the order of joint_names.
 
-    Raises ValueError for a command that must not be executed: unknown or missing joints,
-    no points, wrong lengths, non-finite or out-of-limit positions, times not increasing.
-    Of several problems the first point's is named (positions before velocities before
-    accelerations).  Each check runs over all points at once: the mock takes a command
-    in its executor, and point by point a 14 s motion's 1,450 points held it for 25-40 ms.
+    Raises ValueError for a command Jazzy's JTC refuses (with the lbr stack's parameters:
+    ``allow_partial_joints_goal`` and ``allow_nonzero_velocity_at_trajectory_end`` off): no
+    points, joints other than the controller's or missing, wrong lengths, non-finite values,
+    times not increasing, a last point that still moves.  Positions beyond the limits pass,
+    as they pass JTC: the driver clamps them (``enforce_command_limits``).  Of several
+    problems at points the first point's is named (positions before velocities before
+    accelerations before efforts).  Each check runs over all points at once: the mock takes a
+    command in its executor, and point by point a 14 s motion's 1,450 points held it for
+    25-40 ms.
     """
     points = msg.points
     if not points:
@@ -124,6 +130,11 @@ def command_from_msg(msg: JointTrajectory, joint_names: list[str], lower: np.nda
     missing = [name for name in joint_names if name not in index]
     if missing:
         raise ValueError(f'trajectory lacks joints {", ".join(missing)}')
+    foreign = [name for name in msg.joint_names if name not in joint_names]
+    if foreign or len(msg.joint_names) != len(joint_names):
+        raise ValueError(f'trajectory names {len(msg.joint_names)} joints for the '
+                         f"controller's {len(joint_names)}"
+                         + (f' ({", ".join(foreign)} not among them)' if foreign else ''))
     order = [index[name] for name in joint_names]
     n, m = len(msg.joint_names), len(points)
     problems = []           # (point, rank within the point, message)
@@ -152,11 +163,17 @@ def command_from_msg(msg: JointTrajectory, joint_names: list[str], lower: np.nda
             first(usable & ~finite, 3 * field + 1, f'point {{k}} has non-finite {name}')
         else:
             first(usable & ~finite, 1, 'point {k} is not finite')
-            outside = ((values < lower - 1e-9) | (values > upper + 1e-9)).any(axis=1)
-            first(usable & finite & outside, 2, 'point {k} is outside the joint limits')
         columns[name] = values
+    efforts = np.fromiter((len(point.effort) for point in points), dtype=np.int64, count=m)
+    first((efforts > 0) & (efforts != n), 9, f'point {{k}} has efforts for other than {n} joints')
     if problems:
         raise ValueError(min(problems)[2])
+    end = columns['velocities'][-1]
+    moving = np.abs(np.nan_to_num(end)) > FLOAT_EPSILON
+    if moving.any():
+        j = int(np.argmax(moving))
+        raise ValueError(f'the last point still moves ({joint_names[j]} at {end[j]:.3g} rad/s):'
+                         f' JTC takes only a trajectory that ends at rest')
     times = np.fromiter((to_seconds(point.time_from_start) for point in points), dtype=float,
                         count=m)
     return TrajectoryCommand(times, columns['positions'], columns['velocities'],

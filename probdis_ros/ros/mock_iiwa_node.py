@@ -44,14 +44,13 @@ robot application refuses it, while the arm presses on something with more than 
 
 from __future__ import annotations
 
-from dataclasses import replace
 import sys
 import time
 
 from builtin_interfaces.msg import Time
 import numpy as np
 from probdis_ros.model import iiwa_arm
-from probdis_ros.motion.jtc import DEFAULT_JTC_START, DRIVER_TORQUE_TAU
+from probdis_ros.motion.jtc import DEFAULT_JTC_START, DRIVER_TORQUE_TAU, moved_onto_clock
 from probdis_ros.physics.settings import PhysicsSettings
 from probdis_ros.physics.simulated_robot import (
     build_robot,
@@ -229,13 +228,16 @@ class MockIiwa(Node):
 
     def _on_trajectory(self, msg: JointTrajectory) -> None:
         try:
-            command = command_from_msg(msg, self.joint_names, self.arm.lower, self.arm.upper)
+            command = command_from_msg(msg, self.joint_names)
         except ValueError as err:
             self.get_logger().error(f'trajectory refused: {err}')
             return
-        if command.stamp > 0:       # the node's clock counts from its epoch, the arm's from 0
-            command = replace(command, stamp=command.stamp - self.epoch)
-        self.robot.command(command)
+        # the node's clock counts from its epoch, the arm's from 0
+        moved = moved_onto_clock(command, -self.epoch)
+        if moved is None:
+            self.get_logger().error('trajectory refused: stamped, it ends in the past')
+            return
+        self.robot.command(moved)
 
     def _steps_due(self) -> int:
         """
@@ -270,6 +272,8 @@ class MockIiwa(Node):
         steps = self._steps_due()
         for _ in range(steps):
             self.robot.step()
+        if self.clock_pub is not None and steps:    # time goes on with the driver down too
+            self.clock_pub.publish(Clock(clock=self._stamp(self.robot.time)))
         if self.robot.stopped is not None:
             if not self.driver_down:
                 self.driver_down = True
@@ -284,8 +288,6 @@ class MockIiwa(Node):
         return Time(sec=nanoseconds // 1_000_000_000, nanosec=nanoseconds % 1_000_000_000)
 
     def _publish(self, state: JointStateSample) -> None:
-        if self.clock_pub is not None:
-            self.clock_pub.publish(Clock(clock=self._stamp(self.robot.time)))
         msg = JointState()
         msg.header.stamp = self._stamp(state.time)
         msg.name = list(self.joint_names)

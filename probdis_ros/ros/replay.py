@@ -48,8 +48,8 @@ from probdis_ros.motion.detector import (
 from probdis_ros.motion.jtc import (
     JTC_STARTS,
     JtcTrajectory,
+    moved_onto_clock,
     taken_trajectory,
-    TrajectoryCommand,
 )
 from probdis_ros.motion.state_check import StateCheck, values_by_name
 from probdis_ros.planning.disentangle import failure_from_block
@@ -230,14 +230,6 @@ def _finish(result: ReplayResult) -> ReplayResult:
     return result
 
 
-def _on_recording_clock(command: TrajectoryCommand, clock_offset: float,
-                        t0: float) -> TrajectoryCommand:
-    """Return a command with its stamp, on the arm's clock, moved onto the recording's."""
-    if command.stamp <= 0:
-        return command
-    return replace(command, stamp=command.stamp + clock_offset - t0)
-
-
 def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: set[str],
          names: list[str], arm, given: DetectorSettings | None, result: ReplayResult,
          t0: float, overrides: dict) -> None:
@@ -288,14 +280,17 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
             continue
         if message.topic == trajectory_topic:
             try:
-                command = command_from_msg(msg, names, arm.lower, arm.upper)
+                command = command_from_msg(msg, names)
             except ValueError as err:
                 result.problems.append(f'{t:.3f} s: command refused: {err}')
                 continue
             if measured is None:       # JTC starts it from the first state it reads
                 early = (t, command)   # (its stamp moved by the offset that state shows)
                 continue
-            command = _on_recording_clock(command, offset, t0)
+            command = moved_onto_clock(command, offset - t0)    # on the recording's clock
+            if command is None:
+                result.problems.append(f'{t:.3f} s: command refused: stamped, it ends in the past')
+                continue
             last = None
             if jtc_start == 'desired' and running is not None:
                 last = running[0].sample(t - running[1])
@@ -334,13 +329,18 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
         measured, measured_velocity = q, v
         if early is not None:
             sent, command = early
-            command, early = _on_recording_clock(command, offset, t0), None
-            running = (JtcTrajectory(command, q, measured_velocity, sent), sent)
-            # a path from a free arm, as the live run's first one
-            detector, kind = BlockDetector(running[0], sent, settings, expect_motion=True), 'path'
-            result.paths += 1
-            result.problems.append(f'{sent:.3f} s: command before any joint state: started '
-                                   f'from the first one, at {t:.3f} s')
+            command, early = moved_onto_clock(command, offset - t0), None
+            if command is None:
+                result.problems.append(f'{sent:.3f} s: command refused: stamped, it ends in '
+                                       f'the past')
+            else:
+                running = (JtcTrajectory(command, q, measured_velocity, sent), sent)
+                # a path from a free arm, as the live run's first one
+                detector, kind = (BlockDetector(running[0], sent, settings, expect_motion=True),
+                                  'path')
+                result.paths += 1
+                result.problems.append(f'{sent:.3f} s: command before any joint state: '
+                                       f'started from the first one, at {t:.3f} s')
         result.times.append(t)
         result.configs.append(q)
         result.velocities.append(v)
