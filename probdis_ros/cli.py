@@ -21,7 +21,8 @@ Heavy modules are imported inside each handler so that ``probdis --help`` stays 
 from __future__ import annotations
 
 import argparse
-from collections.abc import Callable, Collection
+from collections.abc import Callable, Collection, Iterator
+import contextlib
 from dataclasses import replace
 import json
 import math
@@ -910,8 +911,6 @@ def _plot_bag(scene_name: str, bag: str, out: str) -> Path:
 
 def cmd_replay(args: argparse.Namespace) -> int:
     """Rerun the blocked-motion detector on a bag; rebuild the failure map."""
-    from probdis_ros.ros.replay import replay, ReplayError, SettingsError
-
     if args.publish:
         return _publish_bag(args)
     if args.rate is not None or args.wait is not None:
@@ -920,6 +919,14 @@ def cmd_replay(args: argparse.Namespace) -> int:
     for flag, out in (('--save-map', args.save_map), ('--plot', args.plot)):
         if out:
             _check_output(out, flag)
+    with _map_held(args.save_map):
+        return _replay_bag(args, overrides)
+
+
+def _replay_bag(args: argparse.Namespace, overrides: dict[str, float]) -> int:
+    """Replay the bag, save and draw what it asks for, and print the outcome."""
+    from probdis_ros.ros.replay import replay, ReplayError, SettingsError
+
     status = 0
     try:
         result = replay(args.bag, args.joint_states, args.trajectory, overrides=overrides)
@@ -960,6 +967,32 @@ def cmd_replay(args: argparse.Namespace) -> int:
     if args.plot:
         print(f'wrote {args.plot}')
     return status
+
+
+@contextlib.contextmanager
+def _map_held(path: str | None) -> Iterator[None]:
+    """
+    Hold a map file's lock while a map is made to be saved there (None: nothing to hold).
+
+    A running planner keeps its map in memory and holds the file's lock: written over, the
+    file lost the replayed failures at the planner's next write, or the planner's at once.
+    """
+    if not path:
+        yield
+        return
+    from probdis_ros.model.failure_map import lock_map, MapInUseError
+
+    try:
+        lock = lock_map(path, {'by': 'probdis replay --save-map', 'pid': os.getpid()})
+    except MapInUseError as err:
+        raise UsageError(f'--save-map: {err}: a planner keeps this map; stop it first or '
+                         f'save elsewhere') from None
+    except OSError as err:
+        raise UsageError(f'--save-map {path}: {err.strerror or err}') from None
+    try:
+        yield
+    finally:
+        os.close(lock)
 
 
 def _replay_overrides(args: argparse.Namespace) -> dict[str, float]:

@@ -202,7 +202,7 @@ def plot_replay(result, out: str | Path, d_dist: float) -> Path:
     ax3.set_zlabel('z [m]')
     thin_3d_ticks(ax3)
     ax3.set_title('flange path')
-    fig.suptitle(f'{result.paths} paths, {len(result.blocks)} blocks, '
+    fig.suptitle(f'{result.paths} path(s), {len(result.blocks)} block(s), '
                  f'{"success" if result.success else "not disentangled"}')
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -24,6 +24,7 @@ import sys
 from conftest import probdis_command
 import numpy as np
 from probdis_ros.model import iiwa_arm
+from probdis_ros.model.failure_map import lock_map
 from probdis_ros.motion.cartesian_speed import point_speeds
 from probdis_ros.motion.timing import time_path
 from probdis_ros.resources import scenario_path
@@ -537,6 +538,15 @@ def test_bad_replay_flags_are_refused_before_the_bag_is_read(tmp_path):
             'probdis replay: error: ') and text in result.stderr, (args, result.stderr)
         assert 'damaged' not in result.stderr
     assert keep.read_text() == 'the map of another run\n'
+    # a running planner holds its map file's lock: the replayed map went over its map
+    held = lock_map(keep, {'node': '/probdis_planner', 'pid': 4242})
+    try:
+        result = run_replay(tmp_path / 'bag', '--save-map', str(keep))
+    finally:
+        os.close(held)
+    assert result.returncode == 2 and result.stderr.count('\n') == 1, result.stderr
+    assert "in use by {'node': '/probdis_planner', 'pid': 4242}" in result.stderr
+    assert keep.read_text() == 'the map of another run\n'
     assert run_replay(tmp_path / 'bag', '--save-map', str(keep)).returncode == 0
     assert json.loads(keep.read_text())['failures']     # the block, in place of the old map
 
@@ -599,3 +609,21 @@ def test_publish_mode_delivers_every_message_in_order_with_its_timing(tmp_path):
     arrivals = [t for t, _ in received[JS]]
     span = (messages[-1][0] - messages[0][0]) * 1e-9 / rate
     assert 0.8 * span < arrivals[-1] - arrivals[0] < 2.0 * span
+
+
+def test_publish_mode_with_nothing_to_publish_publishes_nothing(tmp_path):
+    # a bag of the commands alone: rosbags reads an empty selection of topics as every
+    # message, and the player looked up a publisher it never made (KeyError, a traceback)
+    messages, _, _ = simulated_run()
+    write_bag(tmp_path / 'bag', [m for m in messages if m[1] == TRAJ], 9, StoragePlugin.MCAP)
+    ros = RosTest()             # the test's own domain
+    try:
+        env = dict(os.environ, ROS_DOMAIN_ID=str(ros.domain))
+        result = subprocess.run([*probdis_command(), 'replay', str(tmp_path / 'bag'),
+                                 '--publish', '--wait', '0', '--json'],
+                                env=env, capture_output=True, text=True, timeout=120)
+    finally:
+        ros.close()
+    assert result.returncode == 0, result.stderr
+    doc = json.loads(result.stdout)
+    assert doc['published'] == 0 and list(doc['skipped']) == [TRAJ]

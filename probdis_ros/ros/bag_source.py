@@ -94,6 +94,8 @@ class Bag:
             yield from (m for m in self._salvaged if m.topic in wanted)
             return
         connections = [c for c in self._reader.connections if c.topic in wanted]
+        if not connections:        # rosbags reads an empty selection as every message
+            return
         for conn, stamp, raw in self._reader.messages(connections=connections):
             yield BagMessage(conn.topic, conn.msgtype, stamp, bytes(raw))
 
