@@ -90,6 +90,21 @@ def test_the_controllers_start_and_holds_are_read(setting):
     assert 'from its last command' in check.refusal(False)
 
 
+@pytest.mark.parametrize('open_loop', [True, False])
+def test_a_controller_with_open_loop_control_alone_is_read_by_it(setting, open_loop):
+    # a JTC released before interpolate_from_desired_state: its open_loop_control was read
+    # and dropped, and a measured-start planner started against a desired-start JTC
+    check, client, _ = setting
+    check.poll()
+    answer_all(client, {'open_loop_control': open_loop, 'constraints.goal_time': 0.0})
+    assert check.value is open_loop and check.problem == ''
+    assert bool(check.refusal(False)) is open_loop and bool(check.refusal(True)) is not open_loop
+    setting[2][0] += POLL                        # later neither answers: not known
+    check.poll()
+    answer_all(client, {})
+    assert check.value is None and 'open_loop_control' in check.problem
+
+
 def test_a_command_timeout_is_a_hold_the_desired_start_cannot_see(setting):
     # JTC's cmd_timeout holds the measured position a while after each trajectory's end
     check, client, _ = setting

@@ -617,6 +617,25 @@ def test_a_clock_step_on_the_arm_stops_the_run_with_a_stop_jtc_takes(ros, tmp_pa
     np.testing.assert_allclose(arm.q, end, atol=0.01)
 
 
+def test_the_latched_markers_draw_the_map_as_it_is_from_start_up_to_a_reset(ros, tmp_path):
+    # drawn only before a command: RViz showed nothing of a map loaded at start-up, and the
+    # failures of a map cleared by ~/reset_map (or emptied by a finished run) stayed drawn
+    fmap = FailureMap(iiwa_arm().task_space)
+    for k in range(3):
+        fmap.add([0.2 * k, -0.6, 0.3], [0, 0, 1], [1, 0, 0, 0])
+    fmap.save(tmp_path / 'map.json')
+    planner(ros, tmp_path)
+    drawn = []          # per markers message: how many failures it draws
+    ros.probe.create_subscription(
+        MarkerArray, '/probdis_planner/markers',
+        lambda m: drawn.append(sum(k.ns == 'failures' for k in m.markers)),
+        QoSProfile(depth=10, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    wait_for(lambda: drawn, 5, 'the markers of the loaded map')
+    assert drawn[-1] == 3
+    assert ros.call('reset_map').success
+    wait_for(lambda: drawn[-1] == 0, 5, 'the cleared map drawn')
+
+
 def test_with_confirm_paths_each_path_waits_for_the_operator(ros, tmp_path):
     # robot_waste (the demo's start and goal): the method gets out of it in 1-3 paths for
     # every planner seed 0-11 (probdis sim --scenario robot_waste --seed S); the demo world

@@ -124,12 +124,13 @@ class ControllerSetting:
         self._waiting -= 1
         if self._waiting:
             return
-        first = self._answers.get(PARAMETER)
-        if not isinstance(first, bool):
+        # a JTC released before interpolate_from_desired_state has open_loop_control alone
+        starts = [v for n in STARTS if isinstance(v := self._answers.get(n), bool)]
+        if not starts:
             self.value = None
-            self.problem = f'{self.controller_node} has no boolean {PARAMETER}'
+            self.problem = f'{self.controller_node} has no boolean {" or ".join(STARTS)}'
             return
-        self.value = first or any(self._answers.get(n) is True for n in STARTS[1:])
+        self.value = any(starts)
         self.holds = {n: v for n in self._names[len(STARTS):]
                       if isinstance(v := self._answers.get(n), float) and v > 0}
         self.problem = ''
@@ -168,5 +169,8 @@ class ControllerSetting:
                     f'(on a tolerance violation, or cmd_timeout after a trajectory ends) '
                     f'with {named} ({self.controller_node}), and a planner that '
                     f'models its last command would not see it: with {PARAMETER} set '
-                    f'these to 0 (README, "Pointing it at the real arm"); not starting')
+                    f"these to 0 in the controller's parameter file and load it again (JTC "
+                    f'takes them when it is configured: a value set at run time is read here '
+                    f'but not used there; README, "Pointing it at the real arm"); not '
+                    f'starting')
         return ''

@@ -421,6 +421,7 @@ class PlannerNode(Node):
         self.create_timer(TICK, self._tick, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.create_timer(1.0, self._publish_diagnostics)
         self._publish_status()
+        self._publish_markers(None)     # latched: RViz draws the map as it is, any time
         map_file = self.get_parameter('map_file').value
         self.get_logger().info(f'{NODE_NAME} ready: {len(self.fmap)} failures in the map'
                                + (f' ({map_file})' if map_file else ' (in memory only)'))
@@ -1053,6 +1054,7 @@ class PlannerNode(Node):
                 f'not cleared: {problem}; the map keeps its {count} failures')
         else:
             response.success, response.message = True, f'cleared {count} failures'
+            self._publish_markers(None)
         self._publish_status()
         return response
 
@@ -1148,6 +1150,7 @@ class PlannerNode(Node):
             finished = self.fmap.to_dict()
             self.fmap = FailureMap(self.arm.task_space, self.fmap.c_fail)
             self.io.submit(self._keep_finished_map, self.bag_path, finished)
+            self._publish_markers(None)
 
     def _tick(self) -> None:
         self._note_stall()
