@@ -31,7 +31,12 @@ from pathlib import Path
 import sys
 from typing import TYPE_CHECKING
 
-from probdis_ros.ros import JOINT_STATES_TOPIC, TRAJECTORY_TOPIC  # plain names: no rclpy
+from probdis_ros.ros import (  # plain names: no rclpy
+    DEFAULT_REAL_TIME_FACTOR,
+    DETECTOR_FIELDS,
+    JOINT_STATES_TOPIC,
+    TRAJECTORY_TOPIC,
+)
 
 if TYPE_CHECKING:
     from probdis_ros.planning.methods import Method
@@ -198,8 +203,8 @@ def cmd_experiment_sweep(args: argparse.Namespace) -> int:
         except ValueError:
             raise UsageError('--obstacles takes comma-separated integers, not '
                              f'{args.obstacles!r}') from None
-        if any(n < 0 for n in obstacles):
-            raise UsageError('obstacle counts must not be negative')
+        if any(n < 1 for n in obstacles):     # a world needs one: every episode failed
+            raise UsageError('obstacle counts must be at least 1')
         keys = episode_keys(settings, obstacles, args.worlds, methods, args.seed)
     rrt = {}
     if args.iterations is not None:
@@ -411,7 +416,7 @@ def cmd_experiment_robot(args: argparse.Namespace) -> int:
         run_robot_experiment,
         RUNS_FILE,
     )
-    from probdis_ros.run import MAX_VELOCITY_SCALING
+    from probdis_ros.run import MAX_VELOCITY_SCALING, MIN_VELOCITY_SCALING
 
     scenarios, groups = _robot_worlds(args)
     baseline = None
@@ -426,9 +431,9 @@ def cmd_experiment_robot(args: argparse.Namespace) -> int:
     _not_negative(args.real_time_factor, '--real-time-factor')
     _check_output(args.out, '--out', folder=True)
     runs = args.runs if args.runs is not None else (10 if groups is None else 1)
-    if runs < 1 or not 0 < args.velocity_scaling <= MAX_VELOCITY_SCALING:
+    if runs < 1 or not MIN_VELOCITY_SCALING <= args.velocity_scaling <= MAX_VELOCITY_SCALING:
         raise UsageError(f'--runs must be positive and --velocity-scaling in '
-                         f'(0, {MAX_VELOCITY_SCALING}]')
+                         f'[{MIN_VELOCITY_SCALING}, {MAX_VELOCITY_SCALING}]')
     if args.offline and not physics:
         raise UsageError('--offline runs the physics scenes (--engine physics)')
     _not_negative(args.restarts, '--restarts')
@@ -436,6 +441,10 @@ def cmd_experiment_robot(args: argparse.Namespace) -> int:
         raise UsageError('--restarts needs --offline (the mock node does not restart its '
                          'driver)')
     detection = _detection_overrides(args.detection)
+    beyond = sorted(set(detection) - set(DETECTOR_FIELDS))
+    if beyond and not args.offline:
+        raise UsageError(f'--detection {beyond[0]}: not a parameter of the planner node '
+                         '(--offline runs take it)')
     faults = _fault_overrides(args.fault)
     physical = set(PHYSICS_FAULTS) & set(faults)
     if physical and not physics:
@@ -602,6 +611,7 @@ def _sim_physics(args: argparse.Namespace) -> int:
 
     episode = run_physics_episode(scene, method, seed=args.seed or 0,
                                   max_paths=args.max_paths,
+                                  c_fail=method.map_c_fail(args.c_fail),
                                   run_settings=RunSettings(
                                       jtc_start=args.jtc_start,
                                       cartesian_speed_limit=_cartesian_speed(args)))
@@ -1218,8 +1228,8 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument('--engine', choices=('physics', 'kinematic'), default='physics',
                       help='the mock arm: MuJoCo in joint impedance, or the idealised one')
     demo.add_argument('--sim-time', action='store_true',
-                      help='run the mock on simulated time (/clock), up to 5 times faster '
-                      'than the wall clock')
+                      help='run the mock on simulated time (/clock), at most at the wall '
+                      "clock's pace")
     demo.add_argument('--plot', metavar='OUT.png',
                       help='draw the scene with the flange path and the blocks of the run')
     demo.add_argument('--timeout', type=float, default=300.0, help='seconds for the run')
@@ -1357,8 +1367,9 @@ def build_parser() -> argparse.ArgumentParser:
     robot.add_argument('--engine', choices=('physics', 'kinematic'), default='physics',
                        help='the mock arm: MuJoCo in joint impedance, or the idealised one')
     robot.add_argument('--sim-time', action=argparse.BooleanOptionalAction, default=True,
-                       help='run the mock on simulated time (/clock), faster than real time')
-    robot.add_argument('--real-time-factor', type=float, default=1.0,
+                       help='run the mock on simulated time (/clock), at most '
+                       '--real-time-factor times the wall clock')
+    robot.add_argument('--real-time-factor', type=float, default=DEFAULT_REAL_TIME_FACTOR,
                        help='with --sim-time: speed over the wall clock (at most); 0: as fast '
                        'as the mock can (commands may then be taken late)')
     robot.add_argument('--methods', default='epsilon:0.2,hard:0.01,probabilistic,informed',

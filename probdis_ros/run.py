@@ -140,6 +140,8 @@ class Phase(str, Enum):
 #: the URDF's limit.  Impacts on rigid obstacles add spikes beyond that: near clutter the
 #: default 0.2 keeps a wide margin.
 MAX_VELOCITY_SCALING = 0.7
+#: The slowest velocity scaling the node takes (slower, a path of a metre takes minutes).
+MIN_VELOCITY_SCALING = 0.01
 #: With a desired start, a retreat first brings JTC's command back from where it pressed in to
 #: where the arm is, at this fraction of the velocity limits (the arm, held there, does not
 #: move with it), then retreats at velocity_scaling: the spring is released within about

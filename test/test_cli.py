@@ -229,6 +229,14 @@ def test_the_robot_experiment_offline_is_deterministic_and_takes_detector_overri
     bad = probdis('experiment', 'robot', '--detection', 'gap_ceiling=0.05',
                   '--out', str(tmp_path / 'c'), check=False)
     assert bad.returncode == 2 and 'must exceed d_dist' in bad.stderr
+    # what the node refuses, refused before the nodes start (they were refused after a retry)
+    bad = probdis('experiment', 'robot', '--detection', 'speed_allowance=0.2',
+                  '--out', str(tmp_path / 'c'), check=False)
+    assert bad.returncode == 2 and 'speed_allowance: not a parameter of the planner node' in \
+        bad.stderr
+    bad = probdis('experiment', 'robot', '--velocity-scaling', '0.005',
+                  '--out', str(tmp_path / 'c'), check=False)
+    assert bad.returncode == 2 and '--velocity-scaling in [0.01, 0.7]' in bad.stderr
 
 
 def test_sim_draws_a_family_world_from_the_seed(probdis):

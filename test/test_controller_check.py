@@ -134,3 +134,17 @@ def test_a_controller_that_goes_mid_call_is_no_longer_believed(setting):
     for future in hung:                # late answers of a dropped batch change nothing
         future.answer(ParameterValue(type=ParameterType.PARAMETER_BOOL, bool_value=False))
     assert check.value is None
+
+
+def test_a_path_tolerance_below_the_arms_lag_is_named(setting):
+    # with the measured start JTC's path tolerance is a safety net; below the arm's lag in
+    # free motion JTC holds mid-path and the planner takes every path for blocked
+    check, client, _ = setting
+    check.poll()
+    answer_all(client, {'interpolate_from_desired_state': False,
+                        'constraints.lbr_A1.trajectory': 0.02})
+    assert check.refusal(False) == ''
+    assert check.below_lag({'lbr_A1': 0.2}) == 'lbr_A1 0.02 < 0.20'
+    assert check.below_lag({'lbr_A1': 0.01}) == ''
+    check.holds = {}                                        # 0: no tolerance, no hold
+    assert check.below_lag({'lbr_A1': 0.2}) == ''

@@ -299,6 +299,11 @@ def test_methods_parse_and_bad_ones_are_named():
     result = subprocess.run([*probdis_command(), 'experiment', 'sweep', '--methods', 'rrt',
                              '--out', 'unused'], capture_output=True, text=True, timeout=60)
     assert result.returncode == 2 and "unknown method 'rrt'" in result.stderr
+    # a world without obstacles fails to build: every episode was recorded unsolved, exit 0
+    result = subprocess.run([*probdis_command(), 'experiment', 'sweep', '--setting', '2d',
+                             '--obstacles', '0,10', '--out', 'unused'], capture_output=True,
+                            text=True, timeout=60)
+    assert result.returncode == 2 and 'at least 1' in result.stderr, result.stderr
 
 
 def test_the_robot_table_counts_successes_and_averages_paths_of_successful_runs():

@@ -15,6 +15,8 @@
 
 """The external-torque estimate (efforts minus the gravity model) and its ceiling."""
 
+import math
+
 import numpy as np
 from probdis_ros.motion.detector import (
     BlockDetector,
@@ -114,6 +116,13 @@ def test_the_torque_ceiling_needs_the_load_data_and_waits_without_efforts():
         DetectorSettings(torque_ceiling=-1.0)
     with pytest.raises(ValueError, match='load_com'):
         DetectorSettings(load_com=(0.0, 0.1))
+    # a NaN centre of mass made every estimate NaN: a push of 80 Nm never reached the ceiling
+    for com in ((0.0, math.nan, 0.1), (50.0, 0.0, 0.0)):
+        with pytest.raises(ValueError, match='load_com must be within 1 m'):
+            DetectorSettings(torque_ceiling=20.0, load_mass=0.5, load_com=com)
+    for name in ('d_dist', 'torque_ceiling', 'load_mass'):
+        with pytest.raises(ValueError, match=f'{name} must be a'):
+            DetectorSettings(**{name: math.inf})
 
 
 @pytest.mark.parametrize('efforts, verdict', [

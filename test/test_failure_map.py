@@ -173,7 +173,12 @@ def test_corrupt_entries_never_give_a_half_loaded_map(tmp_path):
     for bad, message in [({'format': 'other'}, 'not a probdis-failure-map'),
                          ({**doc, 'version': 99}, 'unsupported version'),
                          ({**doc, 'task_space': 'point7'}, 'unknown task_space'),
-                         ({**doc, 'failures': {}}, 'must be a list')]:
+                         ({**doc, 'failures': {}}, 'must be a list'),
+                         # a float overflowed (an OverflowError escaped and ended the node)
+                         ({**doc, 'c_fail': 10 ** 400}, 'int too large'),
+                         ({**doc, 'c_fail': -5}, r'map.json: c_fail must be a positive'),
+                         ({**doc, 'failures': [{'x': [10 ** 400, 0.0], 'v': [1.0, 0.0],
+                                                'q': None}]}, 'failure 0')]:
         path.write_text(json.dumps(bad))
         with pytest.raises(FailureMapError, match=message):
             FailureMap.load(path)

@@ -86,6 +86,13 @@ def test_the_planner_node_takes_the_planners_ideas_and_the_bare_names_parameters
             Method.for_node(bad)
     with pytest.raises(ValueError, match='unknown'):
         Method.for_node('sideways')
+    # the node's C_FAIL is its c_fail parameter: probabilistic:50 was taken and its 50 dropped
+    with pytest.raises(ValueError, match='takes C_FAIL from its c_fail parameter'):
+        Method.for_node('probabilistic:50')
+    # a threshold or epsilon of 0 (the node's parameter ranges allow it) as hard:0 is refused
+    for name, values in (('hard', {'threshold': 0.0}), ('epsilon', {'epsilon': 0.0})):
+        with pytest.raises(ValueError, match=rf'{name} takes a parameter in \(0, 1\]'):
+            Method.for_node(name, **values)
 
 
 def test_bare_names_resolve_to_informed_with_its_default_ideas():

@@ -16,6 +16,7 @@
 
 import errno
 import json
+import math
 import os
 from pathlib import Path
 import signal
@@ -541,12 +542,33 @@ def test_the_mock_refuses_a_parameter_it_does_not_have(ros):
         MockIiwa(context=ros.context, parameter_overrides=[Parameter('nois', value=0.1)])
 
 
+def test_a_map_file_and_bag_dir_under_home_are_where_the_user_meant(ros, tmp_path,
+                                                                    monkeypatch):
+    # '~' is no shell's in a parameter: map_file '~/...' was a folder named '~' in the
+    # working directory, and the next start from elsewhere began with an empty map
+    monkeypatch.setenv('HOME', str(tmp_path / 'home'))
+    monkeypatch.chdir(tmp_path)
+    node = planner(ros, tmp_path, map_file='~/maps/arm.json', bag_dir='~/bags')
+    assert node.get_parameter('map_file').value == str(tmp_path / 'home/maps/arm.json')
+    assert node.get_parameter('bag_dir').value == str(tmp_path / 'home/bags')
+    assert (tmp_path / 'home/maps/arm.json.lock').exists()
+    assert not (tmp_path / '~').exists()
+
+
 def test_parameters_that_do_not_go_together_are_refused_when_set(ros, tmp_path):
     # checked only at ~/start before, where the error escaped the service and killed the node
     node = planner(ros, tmp_path)
-    for name, value in (('d_dist', 0.35), ('load_com', [0.0, 0.1])):
+    for name, value in (('d_dist', 0.35), ('load_com', [0.0, 0.1]),
+                        ('load_com', [0.0, math.nan, 0.1])):
         result = node.set_parameters([Parameter(name, value=value)])[0]
         assert not result.successful and name in result.reason, result.reason
+    # the method as it would run: probabilistic:50 dropped its 50 (C_FAIL is c_fail), and a
+    # threshold of 0 made hard plan nothing, where hard:0 was refused
+    assert node.set_parameters([Parameter('method', value='hard')])[0].successful
+    for name, value, reason in (('method', 'probabilistic:50', 'c_fail parameter'),
+                                ('threshold', 0.0, r'hard takes a parameter in (0, 1]')):
+        result = node.set_parameters([Parameter(name, value=value)])[0]
+        assert not result.successful and reason in result.reason, result.reason
     # what start-up built on cannot change under it (the controller checked was the old one;
     # switched to simulated time, the node's clock read 0 without a /clock, every joint state
     # looked fresh, and a run went on after its joint states stopped)

@@ -149,6 +149,11 @@ def test_probdis_sim_engine_physics_prints_json_and_draws_the_scene(tmp_path):
                               'physics', '--scene', str(tmp_path / 'missing.yaml')],
                              capture_output=True, text=True, timeout=120, cwd=ROOT)
     assert refused.returncode != 0 and 'missing.yaml' in refused.stderr
+    # --c-fail was dropped with --engine physics, even a negative one
+    refused = subprocess.run([sys.executable, '-m', 'probdis_ros.cli', 'sim', '--engine',
+                              'physics', '--c-fail', '-5'],
+                             capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert refused.returncode == 2 and 'c_fail must be a positive' in refused.stderr
 
 
 @pytest.mark.ros

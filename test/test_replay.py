@@ -151,6 +151,40 @@ def test_replay_finds_the_block_in_both_storage_formats(tmp_path, version, plugi
     assert t_stop + 0.3 - 0.02 <= block.t <= t_stop + 0.3 + 0.02
 
 
+def test_an_arm_of_another_robot_name_is_replayed_by_the_names_its_commands_give(tmp_path):
+    # a planner run with joint_names iiwa7_A1..: every state was refused for lacking lbr_A1..,
+    # and the replay said "0 path(s)", exit 0, with --save-map an empty map
+    messages, stop, _ = simulated_run()
+    for _, _, fields in messages:
+        key = 'name' if 'name' in fields else 'joint_names'
+        fields[key] = [n.replace('lbr_', 'iiwa7_') for n in fields[key]]
+    write_bag(tmp_path / 'bag', messages, *FORMATS[0])
+    result = replay(tmp_path / 'bag')
+    assert result.paths == 1 and len(result.blocks) == 1
+    np.testing.assert_allclose(result.blocks[0].config, stop, atol=1e-9)
+    # states of joints the commands do not name are all refused: an error, not a success
+    commands = [m for m in simulated_run()[0] if m[1] == TRAJ]
+    write_bag(tmp_path / 'other', [m for m in messages if m[1] == JS] + commands, *FORMATS[0])
+    with pytest.raises(ReplayError, match=r'every joint state was refused .* lbr_A1'):
+        replay(tmp_path / 'other')
+
+
+def test_the_statuses_of_two_planners_recorded_by_ros2_bag_are_told_from_the_commands(tmp_path):
+    # ros2 bag record -a in a cell of two arms: the other arm's "succeeded" ended this arm's
+    # run in the replay, its commands were then holds, and its block was missed
+    messages, _, _ = simulated_run()
+    types = {JS: JS_TYPE, TRAJ: TRAJ_TYPE}
+    t0 = messages[0][0]
+    for arm in ('left', 'right'):
+        status = f'/{arm}/probdis_planner/status'
+        types[status] = 'std_msgs/msg/String'
+        messages.append((t0 - 1, status, {'data': json.dumps({'state': 'succeeded'})}))
+    write_bag(tmp_path / 'bag', messages, *FORMATS[0], types=types)
+    result = replay(tmp_path / 'bag')
+    assert result.paths == 1 and len(result.blocks) == 1
+    assert any('statuses of 2 planners' in p for p in result.problems)
+
+
 @pytest.mark.parametrize('command_first', [False, True])
 def test_a_stamped_command_from_an_arm_whose_clock_is_off_is_replayed_on_the_bags_clock(
         tmp_path, command_first):
@@ -193,12 +227,14 @@ def test_joint_states_held_up_in_delivery_are_dated_by_their_stamps(tmp_path):
     assert result.paths == 1 and result.blocks == [] and result.success, result.problems
 
 
-@pytest.mark.parametrize('by_probdis', [False, True])
-def test_states_are_replayed_at_the_times_the_planner_dated_them(tmp_path, by_probdis):
+@pytest.mark.parametrize('recorder', ['ros2 bag', 'ros2 bag -a', 'probdis'])
+def test_states_are_replayed_at_the_times_the_planner_dated_them(tmp_path, recorder):
     # the planner records each state at the time it dated it, from a delivery it learned
     # long before the bag began; re-dated from the bag alone, a live block at a gap 3e-5 rad
     # past its ceiling came a millisecond early and was missed. Another recorder's bag holds
-    # receive times: those are dated by stamp, as the planner dates them
+    # receive times: those are dated by stamp, as the planner dates them, also where it
+    # recorded the planner's status too (ros2 bag record -a: read as the planner's own bag,
+    # a burst of states held up in delivery was a false block)
     delivery = [0.001] + [0.005] * 99          # one state delivered quicker than the rest
     messages = [(round((2.0 + k / RATE + d) * 1e9), JS,
                  js_message(JOINTS, WORLD.start, 2.0 + k / RATE))
@@ -207,11 +243,16 @@ def test_states_are_replayed_at_the_times_the_planner_dated_them(tmp_path, by_pr
                      0.5)
     messages.append((round(3.1e9), TRAJ, traj_message(move, JOINTS)))
     types = {JS: JS_TYPE, TRAJ: TRAJ_TYPE}
-    if by_probdis:                             # the planner's status: its recording
+    if recorder != 'ros2 bag':                 # the planner's status is recorded
         status = '/probdis_planner/status'
         types[status] = 'std_msgs/msg/String'
         messages.insert(0, (round(1.9e9), status,
                             {'data': json.dumps({'state': 'idle', 'paths': 0})}))
+    by_probdis = recorder == 'probdis'
+    if by_probdis:                             # and the planner says the bag is its own
+        marker = '/probdis_planner/recording'
+        types[marker] = 'std_msgs/msg/String'
+        messages.insert(0, (round(1.9e9), marker, {'data': json.dumps({'status': status})}))
     write_bag(tmp_path / 'bag', messages, *FORMATS[0], types=types)
     result = replay(tmp_path / 'bag')
     t0 = messages[0][0] * 1e-9
@@ -468,6 +509,24 @@ def test_a_bag_cut_in_its_summary_is_read_whole_and_noted(tmp_path):
     assert len(result.times) == sum(1 for m in messages if m[1] == JS)
     assert len(result.blocks) == 1
     np.testing.assert_allclose(result.blocks[0].config, stop, atol=1e-9)
+
+
+def test_a_split_bag_whose_recorder_died_is_read_file_by_file(tmp_path):
+    # ros2 bag record --max-bag-size writes metadata.yaml at its end: a crash leaves the
+    # files alone, and the first of them only was read (the block, in the last, was missed)
+    messages, stop, _ = simulated_run()
+    bag = tmp_path / 'bag'
+    bag.mkdir()
+    parts = np.array_split(np.arange(len(messages)), 3)
+    for k, part in zip((0, 2, 10), parts):      # numbered as rosbag2 numbers them
+        write_bag(tmp_path / f'part{k}', [messages[i] for i in part], 9, StoragePlugin.MCAP)
+        (tmp_path / f'part{k}' / f'part{k}.mcap').rename(bag / f'bag_{k}.mcap')
+    result = replay(bag)
+    assert len(result.times) == sum(1 for m in messages if m[1] == JS)
+    assert len(result.blocks) == 1
+    np.testing.assert_allclose(result.blocks[0].config, stop, atol=1e-9)
+    assert any('bag_0.mcap, bag_2.mcap, bag_10.mcap: read record by record' in p
+               for p in result.problems), result.problems
 
 
 def test_a_bag_cut_midway_reports_what_came_before_the_damage(tmp_path):

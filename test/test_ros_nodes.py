@@ -822,7 +822,8 @@ def test_a_fault_inside_the_run_stops_the_arm_and_the_node_lives_on(ros, tmp_pat
     node.run.on_joint_state = broken
     wait_for(lambda: finished(ros), 5, 'the run to stop')
     assert ros.status['state'] == 'stopped' and 'internal error' in ros.status['message']
-    wait_for(lambda: len(FailureMap.load(tmp_path / 'map.json')) == 1, 5, 'the map saved')
+    saved = tmp_path / 'map.json'         # by the I/O thread, maybe after the status: waited for
+    wait_for(lambda: saved.exists() and len(FailureMap.load(saved)) == 1, 5, 'the map saved')
     last = ros.trajectories[-1][1]        # the stop: at most where the command had begun
     assert np.allclose(last.points[-1].positions, START, atol=1e-3) and \
         np.allclose(last.points[-1].velocities, 0.0)

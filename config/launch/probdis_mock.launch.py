@@ -45,7 +45,7 @@ def _share() -> Path:
 
 def _nodes(context, *args, **kwargs):
     from probdis_ros.physics import load_scene
-    from probdis_ros.ros import default_map_file
+    from probdis_ros.ros import default_map_file, DEFAULT_REAL_TIME_FACTOR
     share = _share()
     scene = LaunchConfiguration('scene').perform(context)
     world = load_scene(scene)
@@ -55,7 +55,7 @@ def _nodes(context, *args, **kwargs):
     return [
         Node(package='probdis_ros', executable='mock_iiwa_node', name='mock_iiwa',
              parameters=[{'scene': scene, 'sim_time': sim,
-                          'real_time_factor': 1.0 if sim else 0.0}]),
+                          'real_time_factor': DEFAULT_REAL_TIME_FACTOR if sim else 0.0}]),
         Node(package='probdis_ros', executable='planner_node', name='probdis_planner',
              parameters=[str(share / 'config' / 'planner.yaml'),
                          {'goal': goal, 'use_sim_time': sim,

@@ -335,14 +335,17 @@ class FailureMap:
         failures = doc.get('failures')
         if not isinstance(failures, list):
             raise FailureMapError(f'{source}: failures must be a list')
-        fmap = cls(task_space, float(c_fail))
+        try:                # an integer of 400 digits overflows a float
+            fmap = cls(task_space, float(c_fail))
+        except (OverflowError, ValueError) as err:
+            raise FailureMapError(f'{source}: {err}') from None
         rows = []
         for i, entry in enumerate(failures):
             if not isinstance(entry, dict):
                 raise FailureMapError(f'{source}: failure {i} is not an object')
             try:
                 rows.append(fmap._failure(entry.get('x'), entry.get('v'), entry.get('q')))
-            except (FailureMapError, TypeError, ValueError) as err:
+            except (FailureMapError, TypeError, ValueError, OverflowError) as err:
                 raise FailureMapError(f'{source}: failure {i}: {err}') from None
         if rows:        # stacked once: a failure at a time was quadratic (1.6 s for 16,000)
             fmap._arrays = tuple(np.array(column) for column in zip(*rows))

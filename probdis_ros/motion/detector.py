@@ -202,6 +202,10 @@ class Verdict(str, Enum):
     NOT_EXECUTED = 'not_executed'
 
 
+#: [m] the farthest a grasped load's centre of mass may lie from the flange, per coordinate
+LOAD_COM_REACH = 1.0
+
+
 @dataclass
 class DetectorSettings:
     """Thresholds of the detector; every default in one place (README "Detection")."""
@@ -228,15 +232,19 @@ class DetectorSettings:
         """Refuse thresholds that cannot work, naming them."""
         for name in ('d_dist', 'stall_time', 'stall_motion', 'settle_time', 'onset_gap',
                      'echo_speed', 'onset_window', 'onset_rate'):
-            if not getattr(self, name) > 0:
-                raise ValueError(f'{name} must be positive, got {getattr(self, name)}')
+            if not 0 < getattr(self, name) < math.inf:
+                raise ValueError(f'{name} must be a positive number, got {getattr(self, name)}')
         for name in ('motion_delay', 'gap_ceiling', 'joint_gap_ceiling', 'echo_time',
                      'speed_allowance', 'torque_ceiling', 'load_mass', 'driver_tau'):
-            if not getattr(self, name) >= 0:
-                raise ValueError(f'{name} must be >= 0, got {getattr(self, name)}')
+            if not 0 <= getattr(self, name) < math.inf:
+                raise ValueError(f'{name} must be a number >= 0, got {getattr(self, name)}')
         if len(self.load_com) != 3:
             raise ValueError(f'load_com must be 3 coordinates [m], got {list(self.load_com)}')
         self.load_com = tuple(float(c) for c in self.load_com)
+        # NaN made every torque estimate NaN, and the torque ceiling never fired
+        if not all(abs(c) <= LOAD_COM_REACH for c in self.load_com):
+            raise ValueError(f'load_com must be within {LOAD_COM_REACH:g} m of the flange in '
+                             f'each coordinate, got {list(self.load_com)}')
         if 0 < self.gap_ceiling <= self.d_dist:
             raise ValueError(f'gap_ceiling {self.gap_ceiling} must exceed d_dist {self.d_dist}')
 

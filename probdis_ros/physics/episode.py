@@ -38,7 +38,11 @@ from probdis_ros.physics.model import TABLE
 from probdis_ros.physics.settings import PhysicsSettings
 from probdis_ros.physics.simulated_robot import build_robot, DRIVER_STOPPED, RobotSettings
 from probdis_ros.planning import Disentangler, Method, RRTSettings, State
-from probdis_ros.planning.disentangle import DEFAULT_MIN_RETREAT
+from probdis_ros.planning.disentangle import (
+    DEFAULT_MAX_PATHS,
+    DEFAULT_MIN_RETREAT,
+    ROBOT_GOAL_TOLERANCE,
+)
 from probdis_ros.planning.prob_rrt import ROBOT_JOINT_MARGIN
 from probdis_ros.run import Learned, Phase, PlanFrom, Propose, Run, RunSettings, Send
 
@@ -120,14 +124,16 @@ class PhysicsEpisode:
 
 
 def run_physics_episode(scene: str, method: str | Method = 'probabilistic', seed: int = 0,
-                        max_paths: int = 20, rrt: RRTSettings | None = None,
+                        max_paths: int = DEFAULT_MAX_PATHS, rrt: RRTSettings | None = None,
                         run_settings: RunSettings | None = None,
                         robot_settings: RobotSettings | None = None,
                         physics_settings: PhysicsSettings | None = None,
-                        time_limit: float = 600.0, goal_tolerance: float = 0.04,
+                        time_limit: float = 600.0,
+                        goal_tolerance: float = ROBOT_GOAL_TOLERANCE,
                         min_retreat: float = DEFAULT_MIN_RETREAT,
                         table: Table | None = ROBOT_TABLE, restarts: int = 0,
-                        confirm_after: float = 0.0) -> PhysicsEpisode:
+                        confirm_after: float = 0.0, c_fail: float | None = None
+                        ) -> PhysicsEpisode:
     """
     Disentangle a physics scene from its start to its goal; reproducible from seed.
 
@@ -145,6 +151,7 @@ def run_physics_episode(scene: str, method: str | Method = 'probabilistic', seed
 
     ``confirm_after``: with ``run_settings.confirm_paths``, the operator confirms each
     planned path this long [s, simulated] after it is proposed (the arm waits at rest).
+    ``c_fail``: the map's C_FAIL (None: the method's).
     """
     if restarts < 0:
         raise ValueError(f'restarts must be >= 0, got {restarts}')
@@ -160,7 +167,7 @@ def run_physics_episode(scene: str, method: str | Method = 'probabilistic', seed
     robot, _ = build_robot('physics', scene, robot_settings, physics_settings)
     scene_doc = robot.engine.scene
     arm = iiwa_arm().on_table(table, scene_doc.object_reach)
-    fmap = method.failure_map(arm.task_space)
+    fmap = method.failure_map(arm.task_space, c_fail)
     # the planner node's default margin, so that offline runs plan as the node does
     rrt = rrt or RRTSettings(joint_margin=ROBOT_JOINT_MARGIN)
     planner = method.planner(arm, rrt)

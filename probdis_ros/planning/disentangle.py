@@ -60,6 +60,11 @@ DIRECTION_PROBE = 1e-3
 LEVER = 0.1
 #: How far [rad, joint space] a retreat goes back at least, along the way the arm came.
 DEFAULT_MIN_RETREAT = 0.1
+#: N_ITER: paths before giving up (the paper's 20).
+DEFAULT_MAX_PATHS = 20
+#: [rad] joint-space distance to the goal that a run on the arm counts as reached (the
+#: paper's simulated worlds stop at 1e-3: the arm ends within its lag and noise).
+ROBOT_GOAL_TOLERANCE = 0.04
 
 
 def failure_from_block(arm: Arm, config: np.ndarray, joint_direction: np.ndarray
@@ -146,7 +151,7 @@ class Disentangler:
     planner: Planner
     goal: np.ndarray
     fmap: FailureMap | None = None
-    max_paths: int = 20
+    max_paths: int = DEFAULT_MAX_PATHS
     seed: int = 0
     goal_tolerance: float = 1e-3
     min_retreat: float = DEFAULT_MIN_RETREAT

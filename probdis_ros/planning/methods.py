@@ -53,6 +53,8 @@ from probdis_ros.planning.objectives import (
 from probdis_ros.planning.prob_rrt import ProbRRT, RRTSettings
 
 METHODS = ('probabilistic', 'hard', 'epsilon', 'informed')
+#: The method of the planner node, ``probdis sim`` and the robot experiment (README).
+DEFAULT_METHOD = 'informed'
 #: The informed ideas the planner node runs: the planner's own.  b, c and e change what the
 #: map learns, and the node's map file keeps failures only (README "The failure map").
 NODE_IDEAS = 'adfghij'
@@ -89,6 +91,11 @@ class Method:
         # default changed over time, and a record of an older default is another variant
         if self.name == 'informed' and self.ideas is None:
             object.__setattr__(self, 'ideas', DEFAULT_IDEAS)
+        # the node's threshold 0 and epsilon 0 reached here as a bare name's values
+        high = math.inf if self.name == 'probabilistic' else 1.0
+        if self.value is not None and not 0 < self.value <= high:
+            raise ValueError(f'{self.name} takes a parameter in (0, {high:g}], got '
+                             f'{self.value}')
 
     @classmethod
     def parse(cls, text: str) -> Method:
@@ -137,6 +144,9 @@ class Method:
 
     def checked_for_node(self) -> Method:
         """Return this method if the planner node can run it; ValueError naming why not."""
+        if self.name == 'probabilistic' and self.value is not None:
+            raise ValueError(f'{self}: the planner node takes C_FAIL from its c_fail parameter '
+                             f'(method probabilistic, c_fail {_text(self.value)})')
         foreign = sorted(set(self.idea_letters) - set(NODE_IDEAS))
         if foreign:
             raise ValueError(f'{self}: the planner node runs the informed ideas '

@@ -30,6 +30,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
+import re
 import struct
 
 from rosbags.rosbag2 import Reader
@@ -70,15 +71,15 @@ class Bag:
             reader = Reader(self.path)
             reader.open()
         except Exception as err:     # rosbags raises several types for a non-bag
-            mcap = _mcap_file(self.path)
-            if mcap is None and self.path.is_dir() and \
+            files = _mcap_files(self.path)
+            if not files and self.path.is_dir() and \
                     not (self.path / 'metadata.yaml').exists():
                 # rosbags' own message names the folder as the missing metadata file
                 raise BagError(f'{self.path}: not a readable rosbag2 bag (a folder without '
                                f'metadata.yaml or an .mcap file)') from None
-            if mcap is None:
+            if not files:
                 raise BagError(f'{self.path}: not a readable rosbag2 bag ({err})') from None
-            self._salvage(mcap, definitions, err)
+            self._salvage(files, definitions, err)
         else:
             self._reader = reader
             self.topics = {c.topic: c.msgtype for c in reader.connections}
@@ -139,33 +140,49 @@ class Bag:
             except Exception:      # a broken definition only matters if its topic is read
                 continue
 
-    def _salvage(self, mcap: Path, definitions: dict[str, tuple[str, str]],
+    def _salvage(self, files: list[Path], definitions: dict[str, tuple[str, str]],
                  refusal: Exception) -> None:
-        """Read an MCAP file record by record up to its first damaged record."""
-        data = mcap.read_bytes()
-        scan = _McapScan(data)
-        scan.run()
-        self._salvaged = sorted(scan.messages, key=lambda m: m.stamp_ns)
-        self.topics = dict(scan.topics)
+        """
+        Read MCAP files record by record, each up to its first damaged record.
+
+        A split bag (``--max-bag-size``) whose recorder died has no metadata.yaml, which is
+        written at the end: every file of it is read, in the order of its number (read the
+        first alone, the blocks in the later ones were missed without a word).
+        """
+        messages, damaged = [], []
+        self.topics = {}
+        for mcap in files:
+            data = mcap.read_bytes()
+            scan = _McapScan(data)
+            scan.run()
+            messages += scan.messages
+            self.topics.update(scan.topics)
+            definitions.update(scan.definitions)
+            if not scan.complete:
+                damaged.append(f'{mcap.name} is damaged at byte {scan.stop} of {len(data)} '
+                               f'({scan.reason}); the {len(scan.messages)} messages before it '
+                               'were read')
+        self._salvaged = sorted(messages, key=lambda m: m.stamp_ns)
         self.start_ns = self._salvaged[0].stamp_ns if self._salvaged else 0
-        definitions.update(scan.definitions)
-        if scan.complete:
-            self.notice = (f'{mcap.name}: read record by record, its index is unusable '
-                           f'({refusal})')
+        names = ', '.join(f.name for f in files)
+        if damaged:
+            self.damage = '; '.join(damaged)
         else:
-            self.damage = (f'{mcap.name} is damaged at byte {scan.stop} of {len(data)} '
-                           f'({scan.reason}); the {len(self._salvaged)} messages before it '
-                           'were read')
+            self.notice = (f'{names}: read record by record, the index is unusable '
+                           f'({refusal})')
 
 
-def _mcap_file(path: Path) -> Path | None:
-    """Return the MCAP file of a bag folder or file, if it starts like one."""
-    candidates = [path] if path.is_file() else sorted(path.glob('*.mcap'))
+def _mcap_files(path: Path) -> list[Path]:
+    """Return the MCAP files of a bag folder (in their numbers' order) or file."""
+    candidates = [path] if path.is_file() else sorted(
+        path.glob('*.mcap'), key=lambda f: [int(p) if p.isdigit() else p
+                                            for p in re.split(r'(\d+)', f.name)])
+    found = []
     for candidate in candidates:
         with candidate.open('rb') as stream:
             if stream.read(8) == MCAP_MAGIC:
-                return candidate
-    return None
+                found.append(candidate)
+    return found
 
 
 class _McapScan:

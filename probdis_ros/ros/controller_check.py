@@ -136,6 +136,18 @@ class ControllerSetting:
         self.problem = ''
         self._answered_at = time.monotonic()
 
+    def below_lag(self, lags: dict[str, float]) -> str:
+        """
+        Return the path tolerances (``constraints.<joint>.trajectory``) below lags ('' none).
+
+        lags: per joint, how far the arm in joint impedance lags its command in free motion
+        [rad].  JTC holds mid-path where a joint lags beyond its tolerance, and the planner,
+        whose command goes on, takes every path for blocked: a false failure each.
+        """
+        tight = [f'{joint} {self.holds[name]:g} < {lag:.2f}' for joint, lag in lags.items()
+                 if 0 < self.holds.get(name := f'constraints.{joint}.trajectory', 0.0) < lag]
+        return ', '.join(tight)
+
     def refusal(self, planner_value: bool) -> str:
         """
         Return why a run must not start with planner_value ('' when it may).

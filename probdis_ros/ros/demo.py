@@ -36,7 +36,7 @@ import numpy as np
 from probdis_ros.motion.jtc import DEFAULT_JTC_START
 from probdis_ros.physics import load_scene
 from probdis_ros.resources import data_file, scenario_path
-from probdis_ros.ros import MOCK_NODE
+from probdis_ros.ros import DEFAULT_REAL_TIME_FACTOR, MOCK_NODE
 from probdis_ros.ros.operator_prompt import OperatorPrompt
 from probdis_ros.sim.worlds import load_world
 
@@ -158,7 +158,7 @@ def world_of(world: str, engine: str) -> tuple[Path, str, np.ndarray, float]:
 
 def run_demo(world: str = DEFAULT_SCENE, timeout: float = 300.0, quiet: bool = False,
              extra_planner_args: tuple[str, ...] = (), engine: str = 'physics',
-             sim_time: bool = False, real_time_factor: float = 5.0,
+             sim_time: bool = False, real_time_factor: float = DEFAULT_REAL_TIME_FACTOR,
              extra_mock_args: tuple[str, ...] = (), jtc_start: str = DEFAULT_JTC_START,
              confirm: bool = False) -> dict:
     """

@@ -62,6 +62,7 @@ from probdis_ros.physics.simulated_robot import (
 )
 from probdis_ros.ros import (
     checked_joint_names,
+    DEFAULT_REAL_TIME_FACTOR,
     JOINT_NAMES,
     JOINT_STATES_TOPIC,
     MOCK_NODE,
@@ -140,8 +141,9 @@ class MockIiwa(Node):
             "the robot application's joint impedance damping ratio (Sunrise takes 0.1 to 1.0; "
             'its default 0.7)', 0.1, 1.0))
         p('sim_time', False, _describe('run on simulated time and publish /clock'))
-        p('real_time_factor', 5.0, _describe('with sim_time: speed over the wall clock '
-                                             '(at most); 0: as fast as possible', 0.0, 1000.0))
+        p('real_time_factor', DEFAULT_REAL_TIME_FACTOR, _describe(
+            'with sim_time: speed over the wall clock (at most); 0: as fast as possible', 0.0,
+            1000.0))
         clock = _describe("the arm's clock less the wall clock [s]: the clock its controller "
                           'and joint states run on, as on a second machine whose clock is not '
                           'synchronised; set while running, the clock steps', -1e6, 1e6)

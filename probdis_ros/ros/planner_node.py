@@ -57,21 +57,31 @@ from probdis_ros.model import FailureMap, FailureMapError, iiwa_arm
 from probdis_ros.model.arms import DRIVER_LIMIT_INSET
 from probdis_ros.model.failure_map import (
     aside_path,
+    DEFAULT_C_FAIL,
     lock_map,
     MapInUseError,
     set_aside,
     write_document,
 )
+from probdis_ros.model.path_cost import DEFAULT_LENGTH_WEIGHT
 from probdis_ros.model.table import ROBOT_TABLE, Table
 from probdis_ros.motion.detector import DetectorSettings, MotionWatch
 from probdis_ros.motion.state_check import BadJointStateError, StateCheck, values_by_name
 from probdis_ros.planning import Disentangler, Method, RRTSettings, State
-from probdis_ros.planning.disentangle import DEFAULT_MIN_RETREAT
+from probdis_ros.planning.disentangle import (
+    DEFAULT_MAX_PATHS,
+    DEFAULT_MIN_RETREAT,
+    ROBOT_GOAL_TOLERANCE,
+)
+from probdis_ros.planning.epsilon import DEFAULT_EPSILON
+from probdis_ros.planning.methods import DEFAULT_METHOD
+from probdis_ros.planning.objectives import DEFAULT_THRESHOLD
 from probdis_ros.planning.prob_rrt import planning_box, ROBOT_JOINT_MARGIN
 from probdis_ros.planning.warm_up import warm_up
 from probdis_ros.ros import (
     checked_joint_names,
     default_map_file,
+    DETECTOR_FIELDS,
     JOINT_NAMES,
     JOINT_STATES_TOPIC,
     TRAJECTORY_TOPIC,
@@ -80,10 +90,11 @@ from probdis_ros.ros.controller_check import ControllerSetting
 from probdis_ros.ros.markers import markers_msg
 from probdis_ros.ros.messages import stamp_seconds, trajectory_msg
 from probdis_ros.ros.node_main import refuse_unknown_parameters, run_node
-from probdis_ros.ros.recorder import BagRecorder, message_types
+from probdis_ros.ros.recorder import BagRecorder, message_types, RECORDING_SUFFIX
 from probdis_ros.run import (
     Learned,
     MAX_VELOCITY_SCALING,
+    MIN_VELOCITY_SCALING,
     PlanCancelledError,
     PlanFrom,
     Propose,
@@ -104,8 +115,9 @@ from rclpy.clock import Clock, ClockType
 from rclpy.duration import Duration
 from rclpy.exceptions import InvalidHandle
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
-from rclpy.serialization import deserialize_message
+from rclpy.serialization import deserialize_message, serialize_message
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
@@ -116,11 +128,14 @@ from visualization_msgs.msg import MarkerArray
 NODE_NAME = 'probdis_planner'
 #: The defaults of the run and of its detector: the parameters below take theirs from here.
 RUN, DETECT = RunSettings(), RunSettings().detection
+RRT = RRTSettings()
+#: JTC's path tolerance a joint needs at least: above its lag in free motion, this plus
+#: this many seconds of its scaled velocity limit [rad, s] (JTC's error on a long free edge:
+#: 0.070 rad at velocity scaling 0.2, 0.25 at 0.7; RESULTS "Velocity scaling: the driver's
+#: guard and JTC's lag")
+PATH_TOLERANCE_FLOOR, PATH_TOLERANCE_LAG = 0.15, 0.15
 RUN_FIELDS = ('velocity_scaling', 'acceleration_scaling', 'acceleration_limit', 'jerk_limit',
               'state_timeout', 'replan_tolerance', 'cartesian_speed_limit', 'confirm_paths')
-DETECTOR_FIELDS = ('d_dist', 'stall_time', 'stall_motion', 'settle_time', 'motion_delay',
-                   'gap_ceiling', 'joint_gap_ceiling', 'onset_gap', 'echo_time',
-                   'driver_tau', 'torque_ceiling', 'load_mass', 'load_com')
 #: After a refused joint state, ~/start is refused for this long [s].
 REFUSAL_HOLD = 1.0
 #: How often the graph is checked: the trajectory topic's subscribers, namesakes [s].
@@ -181,7 +196,7 @@ PARAMETERS = {
                     'the goal it started with')),
     'velocity_scaling': (RUN.velocity_scaling, _float(
         'fraction of the URDF velocity limits (faster than 0.7, the arm in joint impedance '
-        "overshoots them and the driver's command guard stops it)", 0.01,
+        "overshoots them and the driver's command guard stops it)", MIN_VELOCITY_SCALING,
         MAX_VELOCITY_SCALING)),
     'acceleration_scaling': (RUN.acceleration_scaling, _float(
         'fraction of the acceleration and jerk limits', 0.01, 1.0)),
@@ -231,29 +246,30 @@ PARAMETERS = {
     'replan_tolerance': (RUN.replan_tolerance, _float('L1 distance [rad] between the arm and '
                                                       "a plan's start above which it plans "
                                                       'again from the arm', 0.001, 1.0)),
-    'goal_tolerance': (0.04, _float('joint-space distance to the goal that counts as reached',
-                                    0.0, 1.0)),
+    'goal_tolerance': (ROBOT_GOAL_TOLERANCE, _float(
+        'joint-space distance to the goal that counts as reached', 0.0, 1.0)),
     'state_timeout': (RUN.state_timeout, _float('joint states older than this stop the run '
                                                 '[s]', 0.01, 10.0)),
-    'max_paths': (20, _int('N_ITER: paths before giving up', 1, 1000)),
+    'max_paths': (DEFAULT_MAX_PATHS, _int('N_ITER: paths before giving up', 1, 1000)),
     'min_retreat': (DEFAULT_MIN_RETREAT, _float(
         'a retreat goes back along the way the arm came until this far from the block [rad]; '
         '0: to the last via point only', 0.0, 10.0)),
-    'method': ('informed', ParameterDescriptor(
+    'method': (DEFAULT_METHOD, ParameterDescriptor(
         description='informed (the method of the paper with 8x its iterations, probes '
                     'around the start, turning and, once a turned object was blocked, '
                     'straight, and failures that reach 0.5 m; informed:IDEAS with letters '
                     'of adfghij, e.g. informed:afh) | probabilistic (that of '
                     'the paper) | hard | epsilon (hard:Y, epsilon:X set their parameter)')),
-    'threshold': (0.01, _float('Y of the hard method', 0.0, 1.0)),
-    'epsilon': (0.2, _float('X of the epsilon method', 0.0, 1.0)),
-    'c_fail': (100.0, _float('C_FAIL [1/m^2]', 1e-3, 1e6)),
-    'delta': (0.04, _float('Delta: edge discretisation [rad]', 1e-3, 1.0)),
-    'length_weight': (0.01, _float('lambda: weight of joint-space length', 0.0, 10.0)),
-    'iterations': (100, _int('K: iterations per tree', 1, 100000)),
-    'n_random': (100, _int('|C_RAND|: samples per RandomConfiguration', 1, 100000)),
-    'p_goal': (0.1, _float('P_GOAL', 0.0, 1.0)),
-    'step': (1.0, _float('longest new tree edge [rad]', 0.01, 10.0)),
+    'threshold': (DEFAULT_THRESHOLD, _float('Y of the hard method', 0.0, 1.0)),
+    'epsilon': (DEFAULT_EPSILON, _float('X of the epsilon method', 0.0, 1.0)),
+    'c_fail': (DEFAULT_C_FAIL, _float('C_FAIL [1/m^2]', 1e-3, 1e6)),
+    'delta': (RRT.delta, _float('Delta: edge discretisation [rad]', 1e-3, 1.0)),
+    'length_weight': (DEFAULT_LENGTH_WEIGHT, _float('lambda: weight of joint-space length',
+                                                    0.0, 10.0)),
+    'iterations': (RRT.iterations, _int('K: iterations per tree', 1, 100000)),
+    'n_random': (RRT.n_random, _int('|C_RAND|: samples per RandomConfiguration', 1, 100000)),
+    'p_goal': (RRT.p_goal, _float('P_GOAL', 0.0, 1.0)),
+    'step': (RRT.step, _float('longest new tree edge [rad]', 0.01, 10.0)),
     'joint_margin': (ROBOT_JOINT_MARGIN, _float(
         'distance [rad] that samples and via points keep from every joint limit', 0.0, 0.5)),
     'joint_lower': (UNSET_RANGE, ParameterDescriptor(
@@ -265,8 +281,9 @@ PARAMETERS = {
         description='highest position [rad] per joint that the planned paths go to (7 '
                     'values; NaN: the joint limit)')),
     # 0 until a budget is shown to disentangle better (README "Planning and simulation")
-    'plan_time': (0.0, _float('anytime budget [s]: the trees keep growing in rounds of K '
-                              'while it lasts; 0: one round of K (the paper)', 0.0, 60.0)),
+    'plan_time': (RRT.plan_time, _float(
+        'anytime budget [s]: the trees keep growing in rounds of K while it lasts; 0: one '
+        'round of K (the paper)', 0.0, 60.0)),
     'seed': (0, _int('random seed of the planner', 0, 2**31 - 1)),
     'map_file': (default_map_file(), ParameterDescriptor(
         description='failure map file, written after every failure and read at start-up; '
@@ -301,6 +318,11 @@ PARAMETERS = {
 }
 
 
+def full_path(path: str) -> str:
+    """Return a file parameter's path with '~' expanded and absolute ('' stays '': none)."""
+    return os.path.abspath(os.path.expanduser(path)) if path else ''
+
+
 class PlannerNode(Node):
     """Disentangles on request, over the arm's topics."""
 
@@ -312,6 +334,10 @@ class PlannerNode(Node):
             self.declare_parameter(name, default, descriptor)
         refuse_unknown_parameters(self)
         self.add_on_set_parameters_callback(self._check_parameters)
+        # '~' is no shell's here: map_file '~/...' was a folder named '~' in the working
+        # directory, and the map learned on the arm was not the one the next start read
+        self.set_parameters([Parameter(name, value=full_path(self.get_parameter(name).value))
+                             for name in ('map_file', 'bag_dir')])
         self._run_settings()      # start-up values that do not go together: exit 2, named
         self.use_sim_time = bool(self.get_parameter('use_sim_time').value)
         self.arm = iiwa_arm(with_orientation=bool(self.get_parameter('orientation').value))
@@ -566,16 +592,20 @@ class PlannerNode(Node):
                 self._joint_range(ranges)
             except ValueError as err:
                 return SetParametersResult(successful=False, reason=str(err))
+        method = {p.name: p.value for p in params if p.name in ('method', 'threshold', 'epsilon')}
+        if method:       # the method as it would run: hard with threshold 0 plans nothing
+            current = {name: self.get_parameter(name).value
+                       for name in ('method', 'threshold', 'epsilon')}
+            current.update(method)
+            try:
+                Method.for_node(str(current.pop('method')), **current)
+            except ValueError as err:
+                return SetParametersResult(successful=False, reason=f'method: {err}')
         for param in params:
             if param.name == 'goal':
                 problem = self._goal_problem(param.value)
                 if problem:
                     return SetParametersResult(successful=False, reason=f'goal {problem}')
-            if param.name == 'method':
-                try:
-                    Method.for_node(str(param.value))
-                except ValueError as err:
-                    return SetParametersResult(successful=False, reason=f'method: {err}')
             # use_sim_time too: switched during a run, the node's clock would read /clock's
             # (0 without a simulation) while the run's times are the wall clock's; and
             # map_file, read at start-up only: set later, the node's map overwrote that file
@@ -838,6 +868,16 @@ class PlannerNode(Node):
                          f'interpolate_from_desired_state ({self.controller_setting.problem}): '
                          f'make sure it is {str(desired).lower()}, as this planner models it')
             self.get_logger().warning(unchecked)
+        scaled = self.arm.velocity_limits * self.get_parameter('velocity_scaling').value
+        tight = self.controller_setting.below_lag(dict(zip(
+            self.joint_names, PATH_TOLERANCE_FLOOR + PATH_TOLERANCE_LAG * scaled)))
+        if tight and not desired:
+            unchecked = '; '.join(filter(None, (unchecked, (
+                f"joint_trajectory_controller's path tolerance leaves no room for the arm's "
+                f'lag in free motion at this velocity_scaling ({tight} rad): where JTC holds '
+                f'mid-path, the path reads as blocked (README, "Pointing it at the real '
+                f'arm")'))))
+            self.get_logger().warning(unchecked)
         planner = self._make_planner()
         self.fmap.c_fail = float(self.get_parameter('c_fail').value)
         loop = Disentangler(self.arm, planner, np.asarray(goal, dtype=float), self.fmap,
@@ -871,7 +911,7 @@ class PlannerNode(Node):
 
     def _open_bag(self) -> None:
         self._close_bag()
-        folder = self.get_parameter('bag_dir').value
+        folder = full_path(self.get_parameter('bag_dir').value)     # it may be set between runs
         if not folder:
             return
         name = time.strftime('run_%Y%m%d_%H%M%S')
@@ -896,6 +936,10 @@ class PlannerNode(Node):
         for topic, msg_type, _ in self._record_topics:
             module = msg_type.__module__.split('.')[0]
             recorder.add_topic(topic, f'{module}/msg/{msg_type.__name__}')
+        marker = f'{self.get_fully_qualified_name()}{RECORDING_SUFFIX}'
+        recorder.add_topic(marker, 'std_msgs/msg/String')
+        recorder.write(marker, round(self._now() * 1e9), serialize_message(String(
+            data=json.dumps({'status': self._record_topics[2][0]}))))
         self.recorder, self.bag_path = recorder, str(path)
         self._check_recorder()
 

@@ -46,6 +46,11 @@ from rosbags.typesys.store import Typestore
 
 #: Longest time a written message stays in memory before it reaches the file [s].
 FLUSH_INTERVAL = 0.5
+#: A planner's bag says so on its topic ``<node>/recording`` (written into the bag, never
+#: published): its one message names the status topic of that planner.  A replay dates the
+#: joint states of such a bag as the planner recorded them; another recorder's (``ros2 bag
+#: record -a``, which records the planner's status too) holds receive times.
+RECORDING_SUFFIX = '/recording'
 #: Longest wait of :meth:`BagRecorder.close` for the writes handed over [s].
 CLOSE_WAIT = 5.0
 

@@ -60,6 +60,7 @@ from probdis_ros.ros.messages import (
     command_from_msg,
     stamp_seconds,
 )
+from probdis_ros.ros.recorder import RECORDING_SUFFIX
 
 FINISHED = ('succeeded', 'gave_up', 'stopped')
 JOINT_STATE_TYPE = 'sensor_msgs/msg/JointState'
@@ -185,7 +186,6 @@ def replay(bag: str | Path, joint_states_topic: str = JOINT_STATES_TOPIC,
     """
     if settings is None:
         detector_settings({}, overrides or {})
-    names = list(joint_names or JOINT_NAMES)
     arm = iiwa_arm(with_orientation=orientation)
     result = ReplayResult(fmap=FailureMap(arm.task_space))
     try:
@@ -205,11 +205,12 @@ def replay(bag: str | Path, joint_states_topic: str = JOINT_STATES_TOPIC,
                                   f'not {msgtype}')
         if source.notice:
             result.problems.append(source.notice)
-        status = {t for t, m in source.topics.items()
-                  if t.endswith('/probdis_planner/status') and m == 'std_msgs/msg/String'}
+        status, dated = _planner_status(source, result.problems)
+        # the arm's names as the commands give them (a robot_name other than lbr's)
+        names = list(joint_names or _commanded_names(source, trajectory_topic) or JOINT_NAMES)
         try:
             _run(source, [joint_states_topic, trajectory_topic, *status], trajectory_topic,
-                 status, names, arm, settings, result, source.start_ns * 1e-9,
+                 status, dated, names, arm, settings, result, source.start_ns * 1e-9,
                  overrides or {})
         except BagError as err:
             raise ReplayError(f'{bag}: {err}', _finish(result)) from None
@@ -220,7 +221,22 @@ def replay(bag: str | Path, joint_states_topic: str = JOINT_STATES_TOPIC,
                               f'({err})', _finish(result)) from None
         if source.damage:
             raise ReplayError(f'{bag}: {source.damage}', _finish(result))
+        if not result.times and source.count([joint_states_topic]):
+            refused = next((p for p in result.problems if 'joint state refused' in p), '')
+            raise ReplayError(f'{bag}: every joint state was refused ({refused}); joints named '
+                              f'{", ".join(names)}')
     return _finish(result)
+
+
+def _commanded_names(source: Bag, trajectory_topic: str) -> list[str] | None:
+    """Return the joint names of the first command in the bag (None: none usable)."""
+    for message in source.messages([trajectory_topic]):
+        try:
+            names = list(source.deserialize(message).joint_names)
+        except BagError:
+            return None
+        return names if len(set(names)) == len(JOINT_NAMES) == len(names) else None
+    return None
 
 
 def _finish(result: ReplayResult) -> ReplayResult:
@@ -230,8 +246,35 @@ def _finish(result: ReplayResult) -> ReplayResult:
     return result
 
 
+def _planner_status(source: Bag, problems: list[str]) -> tuple[set[str], bool]:
+    """
+    Return the recording planner's status topic (or none) and whether it made the bag.
+
+    A planner's own bag says so (``<node>/recording``, naming its status topic): its joint
+    states are dated as the planner dated them.  Another recorder's holds receive times,
+    and may hold the statuses of other planners too (``ros2 bag record -a`` in a cell of two
+    arms, whose other "succeeded" ended this arm's run): one status is taken, several none.
+    """
+    strings = {t for t, m in source.topics.items() if m == 'std_msgs/msg/String'}
+    for marker in sorted(t for t in strings if t.endswith(RECORDING_SUFFIX)):
+        for message in source.messages([marker]):
+            try:
+                named = json.loads(source.deserialize(message).data).get('status')
+            except (BagError, ValueError, AttributeError):
+                break
+            if named in strings:
+                return {named}, True
+            break
+    status = {t for t in strings if t.endswith('/probdis_planner/status')}
+    if len(status) > 1:
+        problems.append(f'statuses of {len(status)} planners recorded ({", ".join(sorted(status))}'
+                        f'): runs are told from the commands alone')
+        return set(), False
+    return status, False
+
+
 def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: set[str],
-         names: list[str], arm, given: DetectorSettings | None, result: ReplayResult,
+         dated: bool, names: list[str], arm, given: DetectorSettings | None, result: ReplayResult,
          t0: float, overrides: dict) -> None:
     # the detector the live planner ran (its status carries it), unless the caller chose one
     settings = result.settings = given or detector_settings({}, overrides)
@@ -255,7 +298,6 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
     # where a re-dating from the bag alone differs beyond rounding (by a millisecond once: a
     # live block at a gap 3e-5 rad past its ceiling was missed), that recorded time is the
     # detector's; other recorders' bags hold receive times, dated as the planner dates them
-    dated = bool(status_topics)
     offset = 0.0               # the recording's clock less the arm's (stamped commands)
     for message in source.messages(topics):
         t = message.stamp_ns * 1e-9 - t0
