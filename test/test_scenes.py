@@ -232,6 +232,9 @@ def test_unreadable_and_invalid_files_are_refused(tmp_path):
     broken.write_text('start: [1, 2\n')
     with pytest.raises(SceneError, match='not valid YAML'):
         load_scene(broken)
+    broken.write_bytes(b'\x99\xaf binary')     # not text: the file was not named
+    with pytest.raises(SceneError, match=r'broken\.yaml: not valid YAML'):
+        load_scene(broken)
     listed = tmp_path / 'list.yaml'
     listed.write_text('- 1\n')
     with pytest.raises(SceneError, match='a scene is a mapping'):

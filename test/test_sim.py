@@ -213,6 +213,9 @@ def test_scenario_files_round_trip_and_refuse_bad_input(tmp_path):
         (tmp_path / 'bad.yaml').write_text(text)
         with pytest.raises(ScenarioError, match=message):
             load_world(tmp_path / 'bad.yaml')
+    (tmp_path / 'bad.yaml').write_bytes(b'\x99\xaf binary')    # not text: named, not a trace
+    with pytest.raises(ScenarioError, match=r'bad\.yaml: not valid YAML'):
+        load_world(tmp_path / 'bad.yaml')
 
 
 def test_an_episode_in_a_hand_made_world():

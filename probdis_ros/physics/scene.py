@@ -399,7 +399,7 @@ def load_scene(name: str | Path) -> Scene:
         doc = yaml.safe_load(path.read_text())
     except OSError as err:
         raise SceneError(f'cannot read scene {path}: {err.strerror}') from None
-    except yaml.YAMLError as err:
+    except (yaml.YAMLError, UnicodeDecodeError) as err:
         raise SceneError(f'{path}: not valid YAML: {err}') from None
     try:
         return scene_from_dict(doc, path.stem, str(path))

@@ -125,7 +125,7 @@ def load_world(path: str | Path) -> World:
         doc = yaml.safe_load(path.read_text())
     except OSError as err:
         raise ScenarioError(f'cannot read scenario {path}: {err.strerror}') from None
-    except yaml.YAMLError as err:
+    except (yaml.YAMLError, UnicodeDecodeError) as err:
         raise ScenarioError(f'{path}: not valid YAML: {err}') from None
     try:
         return world_from_dict(doc)
