@@ -961,7 +961,8 @@ def _replay_bag(args: argparse.Namespace, overrides: dict[str, float]) -> int:
         return status
     print(f'{args.bag}: {result.runs} run(s), {result.paths} path(s), {len(result.blocks)} '
           f'block(s), {"disentangled" if result.success else "not disentangled"}; peak gap '
-          f'{result.peak_gap:.3f} rad (motion_delay {result.settings.motion_delay:g} s); '
+          f'{result.peak_gap:.3f} rad (motion_delay {result.settings.motion_delay:g} s), at '
+          f'rest after a command {result.rest_gap:.3f} rad (d_dist {result.settings.d_dist:g}); '
           f'fastest point of the arm {result.peak_point_speed:.3f} m/s' + (
               '' if result.torque_peak is None else
               f'; peak external torque {result.torque_peak.max():.1f} Nm at '

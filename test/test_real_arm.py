@@ -59,6 +59,23 @@ def test_free_motion_with_noise_and_a_load_error_is_never_taken_for_a_block(scen
     assert verdict is Verdict.DONE
 
 
+def test_joint_friction_holds_a_free_arm_off_its_command_and_d_dist_must_clear_it():
+    # the ideal mock has no friction; 3 Nm a joint that the impedance law leaves (with the
+    # 1 kg load error) held the arm 0.11 rad (L1) off its goal at rest: above d_dist 0.1, a
+    # free path read as blocked.  The replay tells that gap (rest_gap); d_dist above it
+    free = replace(load_scene('demo_hook'), obstacles=())
+    verdicts = {}
+    for d_dist in (0.1, 0.15):
+        arm = PhysicsIiwa(free, PhysicsSettings(object_mass_error=-1.0, joint_friction=3.0))
+        robot = SimulatedRobot(arm, free.start, RobotSettings(noise=0.001, seed=3))
+        motion = measure._motion(np.array([free.start, free.goal]), 0.2)
+        _, verdicts[d_dist] = measure._drive(
+            robot, motion.command, replace(measure._detection(), d_dist=d_dist),
+            motion.duration + 3.0)
+        assert np.abs(robot.engine.q - free.goal).sum() > 0.1     # held off by the friction
+    assert verdicts == {0.1: Verdict.BLOCKED, 0.15: Verdict.DONE}
+
+
 DRIVERS = [(DRIVER_FILTER_TAU, DRIVER_FILTER_TAU), (0.0, DRIVER_FILTER_TAU),
            (OLD_DRIVER_FILTER_TAU, OLD_DRIVER_FILTER_TAU)]
 

@@ -289,6 +289,32 @@ def test_a_free_move_gives_the_least_peak_gap_at_the_arms_own_lag_and_its_top_sp
     assert fastest == pytest.approx(truth, rel=0.03)
 
 
+@pytest.mark.parametrize('short', [0.03, 0.12])
+def test_the_gap_at_rest_after_a_free_move_is_told_and_above_d_dist_reads_as_a_block(
+        tmp_path, short):
+    # joint friction and load-data error hold the arm off its command at rest (3 Nm a joint
+    # ended free moves of the physics mock blocked): the user must see how far, to keep
+    # d_dist above it (README, first session)
+    arm = iiwa_arm()
+    path = np.array([WORLD.start, WORLD.start + np.array([0.5, -0.3, 0.0, 0.4, 0.0, -0.3, 0.6])])
+    timed = time_path(path, arm.velocity_limits, 0.5)
+    offset = np.array([short / 2, 0.0, short / 2, 0.0, 0.0, 0.0, 0.0])
+    messages = [(int(1e9), JS, js_message(JOINTS, path[0], 1.0)),
+                (int(1.05e9), TRAJ, traj_message(timed, JOINTS))]
+    for t in np.arange(0.05, timed.duration + 1.5, 1.0 / RATE):
+        share = min(max(t - 0.05, 0.0) / timed.duration, 1.0)     # the offset grows on the way
+        messages.append((int((1.0 + t) * 1e9), JS, js_message(
+            JOINTS, timed.at(max(t - 0.05 - 0.1, 0.0)) - share * offset, 1.0 + t)))
+    write_bag(tmp_path / 'bag', messages, *FORMATS[0])
+    result = replay(tmp_path / 'bag')
+    if short < result.settings.d_dist:
+        assert result.success and not result.blocks
+        assert result.rest_gap == pytest.approx(short, abs=0.002)
+        assert result.summary()['rest_gap_rad'] == result.rest_gap
+    else:
+        assert len(result.blocks) == 1 and result.rest_gap == 0.0
+
+
 def test_a_command_recorded_before_the_first_joint_state_starts_from_the_first_one(tmp_path):
     messages, stop, _ = simulated_run()
     assert messages[0][1] == JS and messages[1][1] == TRAJ

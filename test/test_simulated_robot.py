@@ -313,6 +313,23 @@ def test_a_driver_stopped_while_the_arm_presses_on_something_cannot_be_restarted
     assert robot.stopped is not None
 
 
+def test_kukas_collision_detection_stops_the_driver_on_an_external_torque():
+    # a safety configuration may stop the arm on its external torque: the driver then goes
+    # down as on a speed monitoring stop (the node sees its states stop)
+    scene = load_scene('demo_hook')
+    robot, _ = build_robot('physics', scene, RobotSettings(collision_torque=15.0))
+    command_to(robot, scene.goal, 0.2)
+    while robot.stopped is None and robot.time < 10.0:
+        robot.step()
+    assert robot.stopped is not None and "KUKA's collision detection" in robot.stopped
+    assert robot._stop_torque.max() > 15.0
+    free, _ = build_robot('physics', free_scene(), RobotSettings(collision_torque=15.0))
+    _, duration = command_to(free, free_scene().goal, 0.2)
+    while free.time < duration + 0.5:           # free motion stays below it
+        free.step()
+    assert free.stopped is None
+
+
 @pytest.mark.parametrize('engine', ['kinematic', 'physics'])
 def test_a_command_whose_spline_overflows_is_held_not_a_crash(engine):
     # a finite velocity of 1e308 passes every check and JTC's spline overflows to NaN: the

@@ -346,6 +346,7 @@ def build_mjcf(scene: Scene | None = None, settings: PhysicsSettings | None = No
                 f'<joint name="{joint.name}" type="hinge" axis="{_f(joint.axis)}" '
                 f'range="{_f((joint.lower, joint.upper))}" limited="true" '
                 f'armature="{_f(settings.armature[dof])}" '
+                f'frictionloss="{_f(settings.joint_friction)}" '
                 f'actuatorfrcrange="{_f((-joint.effort, joint.effort))}" '
                 f'actuatorfrclimited="true" actuatorgravcomp="true"/>')
             dof += 1

@@ -17,6 +17,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+import math
 
 
 @dataclass(frozen=True)
@@ -44,6 +45,11 @@ class PhysicsSettings:
     #: explicit PD (DESIGN.md "Facts: a physics-simulated iiwa"): measured
     #: stable with 0 too, at 1 and 2 ms.
     armature: tuple[float, ...] = (0.01,) * 7
+    #: Dry friction [Nm] in every joint that the impedance law leaves (MuJoCo's
+    #: frictionloss): what of gear friction and model error KUKA's joint-torque feedback
+    #: does not remove; at 200 Nm/rad each Nm holds a joint 0.005 rad from its command at
+    #: rest.  0: none (the ideal arm).
+    joint_friction: float = 0.0
     #: Rotational stiffness of the grasp [Nm/rad] about each flange axis: the object turns
     #: in the gripper when pressed; 0: welded to the flange (the planner's assumption).
     grasp_stiffness: float = 0.0
@@ -69,6 +75,8 @@ class PhysicsSettings:
             raise ValueError('stiffness must be 7 positive values (Nm/rad)')
         if len(self.armature) != 7 or min(self.armature) < 0:
             raise ValueError('armature must be 7 values >= 0 (kg m^2)')
+        if not 0 <= self.joint_friction < math.inf:
+            raise ValueError('joint_friction must be >= 0 (Nm)')
         if not self.grasp_stiffness >= 0:
             raise ValueError('grasp_stiffness must be >= 0 (Nm/rad; 0: a rigid grasp)')
         if self.damping_ratio < 0:

@@ -145,7 +145,8 @@ class KinematicEngine:
 
 
 #: The faults of the command path and the driver (RobotSettings' non-negative fields).
-DRIVER_FAULTS = ('noise', 'effort_noise', 'latency', 'command_latency', 'speed_monitor')
+DRIVER_FAULTS = ('noise', 'effort_noise', 'latency', 'command_latency', 'speed_monitor',
+                 'collision_torque')
 #: The second word of the seed of the joint torques' noise stream (RobotSettings.seed first).
 EFFORT_STREAM = 1
 
@@ -164,6 +165,7 @@ class RobotSettings:
     echo: bool = False                      # report the command sent, not the arm (open_loop)
     guard: bool = True                      # the driver's command guard stops it on a fault
     speed_monitor: float = 0.0              # KUKA's Cartesian speed monitoring [m/s]; 0: off
+    collision_torque: float = 0.0           # KUKA's collision detection [Nm, a joint]; 0: off
     limiter: bool = True                    # ros2_control's joint limiter (CommandLimiter)
     seed: int = 0                           # noise stream
     jtc_start: str = DEFAULT_JTC_START      # JTC's interpolate_from_desired_state: 'desired'
@@ -296,7 +298,8 @@ class SimulatedRobot:
         self.sent_speed_peak = max(self.sent_speed_peak,
                                    self._speed_over_limit(sent - self._sent_before))
         self.engine.advance(sent, self.settings.period)
-        if self.settings.guard or self.settings.speed_monitor:
+        if self.settings.guard or self.settings.speed_monitor or \
+                self.settings.collision_torque:
             self.stopped = self._guard(sent, before)
             if self.stopped is not None:
                 self._held = self.engine.q.copy()
@@ -317,6 +320,14 @@ class SimulatedRobot:
             if fastest > limit:
                 return (f"KUKA's Cartesian speed monitoring: a point of the arm at "
                         f'{fastest:.3f} m/s, above {limit:g} m/s (a safety stop)')
+        limit = self.settings.collision_torque
+        if limit:
+            torque = self._external_torque()
+            if torque.max() > limit:
+                joint = int(np.argmax(torque))
+                return (f"KUKA's collision detection: an external torque of "
+                        f'{torque[joint]:.1f} Nm at A{joint + 1}, above {limit:g} Nm (a safety '
+                        f'stop)')
         if not self.settings.guard:
             return None
         limits = self._limits
@@ -372,13 +383,15 @@ ENGINES = ('physics', 'kinematic')
 
 #: The faults of the physics arm alone.
 PHYSICS_FAULTS = ('object_mass_error', 'armature', 'grasp_stiffness', 'stiffness',
-                  'damping_ratio')
+                  'damping_ratio', 'joint_friction')
 #: What a real setup adds to the ideal mock, by the mock node's parameter names: the
 #: driver's joint-state ``noise`` [rad], ``effort_noise`` [Nm] and ``latency`` [s], the
 #: delivery of its commands, ``command_latency`` [s] (a loaded machine or network, a large
-#: message), and KUKA's ``speed_monitor`` [m/s] (RobotSettings), the load model's
+#: message), KUKA's ``speed_monitor`` [m/s] and ``collision_torque`` [Nm: its collision
+#: detection on the external torque of any joint] (RobotSettings), the load model's
 #: ``object_mass_error`` [kg], the motors' reflected inertia ``armature`` [kg m^2, every
-#: joint] and a grasp that gives, ``grasp_stiffness`` [Nm/rad]; and the robot application's
+#: joint], a grasp that gives, ``grasp_stiffness`` [Nm/rad], the joints' dry friction the
+#: impedance law leaves, ``joint_friction`` [Nm]; and the robot application's
 #: joint impedance, ``stiffness`` [Nm/rad, every joint] and ``damping_ratio``, which a user
 #: sets on the real arm (PhysicsSettings; the physics arm only).
 FAULTS = DRIVER_FAULTS + PHYSICS_FAULTS
@@ -400,7 +413,7 @@ def with_faults(faults: Mapping[str, float], settings: RobotSettings | None = No
                     **{k: float(v) for k, v in faults.items() if k in DRIVER_FAULTS})
     physics = replace(PhysicsSettings(), **{k: float(v) for k, v in faults.items()
                                             if k in ('object_mass_error', 'grasp_stiffness',
-                                                     'damping_ratio')})
+                                                     'damping_ratio', 'joint_friction')})
     for name in ('armature', 'stiffness'):      # one value for every joint
         if name in faults:
             physics = replace(physics, **{name: (float(faults[name]),) * 7})

@@ -120,6 +120,9 @@ class MockIiwa(Node):
             "KUKA's Cartesian speed monitoring [m/s]: a point of the arm (URDF collision "
             'shapes, flange) faster stops it, as a safety stop ends the FRI session (T1 means '
             'to keep 0.25); 0: off', 0.0, 10.0))
+        p('collision_torque', 0.0, _describe(
+            "KUKA's collision detection [Nm]: an external torque above this at any joint stops "
+            'it, as a safety stop ends the FRI session; 0: off', 0.0, 1000.0))
         p('enforce_command_limits', True, _describe(
             "the controller manager's joint limiter between JTC and the driver (the lbr "
             "stack's default): each period's command within the velocity limits of the last"))
@@ -131,6 +134,9 @@ class MockIiwa(Node):
         p('armature', PhysicsSettings().armature[0], _describe(
             "the motors' reflected inertia, every joint [kg m^2] (not published by KUKA)",
             0.0, 10.0))
+        p('joint_friction', PhysicsSettings().joint_friction, _describe(
+            'dry friction in every joint that the impedance law leaves [Nm] (the physics '
+            'arm)', 0.0, 100.0))
         p('grasp_stiffness', PhysicsSettings().grasp_stiffness, _describe(
             'the grasp turns the object by torque / this [Nm/rad]; 0: the object is welded '
             'to the flange', 0.0, 1e5))

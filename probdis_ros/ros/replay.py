@@ -133,6 +133,9 @@ class ReplayResult:
     torque_peak: np.ndarray | None = None
     # (time, that estimate) at every joint state that carries efforts, for the plot
     torques: list[tuple[float, np.ndarray]] = field(default_factory=list)
+    # the largest L1 gap [rad] with which a command ended done, the arm at rest: what friction
+    # and model error leave on the arm; a free path ending above d_dist reads as blocked
+    rest_gap: float = 0.0
 
     @property
     def peak_gap(self) -> float:
@@ -167,6 +170,7 @@ class ReplayResult:
                            for b in self.blocks],
                 'failures': len(self.fmap) if self.fmap is not None else 0,
                 'success': self.success, 'peak_gap_rad': self.peak_gap,
+                'rest_gap_rad': self.rest_gap,
                 'peak_point_speed_mps': self.peak_point_speed,
                 'peak_external_torque_nm': None if self.torque_peak is None else
                 [round(float(t), 1) for t in self.torque_peak]}
@@ -406,6 +410,7 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
         if verdict is Verdict.DONE:
             if kind == 'path':
                 last_path_done = True
+            result.rest_gap = max(result.rest_gap, detector.gap)
             detector = None
         elif verdict is Verdict.NOT_EXECUTED:
             result.problems.append(f'{t:.3f} s: {detector.reason}: nothing executed the command')
