@@ -202,16 +202,13 @@ class RunSettings:
                             lower=arm.lower, upper=arm.upper, cartesian=cartesian)
 
 
-#: [rad/s] JTC's command moves when a joint's speed is above this (a desired start stamps it)
-MOVING_COMMAND = 1e-3
 #: [s] a stamped message ends at least this long after its stamp (a hold at its last point)
 STAMP_HORIZON = 1.0
 
 
-def stamped(command: TrajectoryCommand, now: float,
-            last: tuple[np.ndarray, np.ndarray, np.ndarray] | None) -> TrajectoryCommand:
+def stamped(command: TrajectoryCommand, now: float, desired: bool) -> TrajectoryCommand:
     """
-    Return the message of a command made at now from JTC's moving command ``last``: stamped.
+    Return the message of a command made at now: stamped where JTC starts from its command.
 
     With a desired start JTC starts a message from its own command when it takes it (its next
     update once built and delivered).  Made from that command at now and unstamped, a
@@ -220,14 +217,19 @@ def stamped(command: TrajectoryCommand, now: float,
     -1.77 (past its limit).  Stamped with now, JTC runs it on its own time line: a stop
     taken 0-30 ms late changes speed by at most its own deceleration over the delay (0.2
     rad/s in a period at scaling 0.7).  (A stamp ahead of now made a bump: JTC dates its own
-    point before a message a period early; 30 ms ahead, 0.9 rad/s in a period.)  JTC drops a
-    stamped message whose last point is due before it arrives (:func:`ends_in_the_past`): a
-    short stop taken late would leave the old command running, so a stamped message ends
-    ``STAMP_HORIZON`` after its stamp at least, holding its last point.  A command at rest
-    (the measured start, or JTC's command holding) goes unstamped: taken whenever, it starts
-    where JTC is, and a late one does not jump into its own middle.
+    point before a message a period early; 30 ms ahead, 0.9 rad/s in a period.)  A command
+    from rest is stamped too: unstamped, JTC ran it from its next update while the run
+    modelled it from now, and a stop made later from that model put JTC's command as far
+    ahead as the delivery was late (a fuzzer: 1.8 x the velocity limit for a period, taken
+    13 ms late at scaling 0.7); stamped, one taken late starts a few milliseconds into its
+    jerk-limited ramp (1e-4 rad, 0.02 rad/s at 20 ms).  JTC drops a stamped message whose
+    last point is due before it arrives (:func:`ends_in_the_past`): a short stop taken late
+    would leave the old command running, so a stamped message ends ``STAMP_HORIZON`` after
+    its stamp at least, holding its last point.  With the measured start nothing is stamped:
+    JTC starts a message from the arm when it takes it, and a late one would jump into its
+    own middle.
     """
-    if last is None or np.abs(last[1]).max() <= MOVING_COMMAND:
+    if not desired or now <= 0:       # a stamp of 0 is none (a clock at its epoch)
         return command
     command = replace(command, stamp=now)
     if command.times[-1] >= STAMP_HORIZON:
@@ -459,6 +461,12 @@ class Run:
                 # a state without velocities: the arm on its command moves as it says (a
                 # stop or a path from it taken at rest would hold a moving arm dead)
                 self.measured_velocity = v
+            elif velocity is None and len(self._recent) > 1:
+                # off its command (a lag other than motion_delay, springing back after a
+                # block): as its positions move; taken at rest, a stop stepped a moving arm's
+                # command by up to 2.2 rad/s in a period (a fuzzer, scaling 0.7)
+                times, positions = zip(*self._recent)
+                self.measured_velocity = slope_of(np.array(times), np.array(positions))
         if not self.phase.active:
             return
         if self.detector is None:
@@ -811,7 +819,7 @@ class Run:
         """
         now = self._time() if planned_at is None else planned_at
         last = self._last_command(now)
-        command = stamped(self._message(motion), now, last)
+        command = stamped(self._message(motion), now, self._desired_start)
         self._emit(Send(command, path, now))
         self.motion = motion
         self.trajectory = taken_trajectory(command, now, self.measured, self.measured_velocity,
@@ -956,7 +964,7 @@ class Run:
             except (RuntimeError, ValueError):      # brake it below at least
                 release = None
         if release is not None:
-            command = stamped(self._message(release), now, last)
+            command = stamped(self._message(release), now, self._desired_start)
             self._emit(Send(command, None, now))
             self.trajectory = taken_trajectory(command, now, last[0], last[1], last,
                                                self.period)
@@ -987,7 +995,7 @@ class Run:
             command = self._message(stop(q, v, a, self.limits))
         except (RuntimeError, ValueError):      # never left without a command to stop
             command = self._message(stop(q, 0 * q, 0 * q, self.limits))   # hold there
-        command = stamped(command, now, last)
+        command = stamped(command, now, self._desired_start)
         self._emit(Send(command, None, now))
         # what the arm runs from now on: a later stop without fresh states starts from it
         self.trajectory = taken_trajectory(command, now, q, v, last, self.period)

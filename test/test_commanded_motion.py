@@ -37,7 +37,12 @@ from probdis_ros.motion.detector import (
     START_WAIT,
     Verdict,
 )
-from probdis_ros.motion.jtc import JtcTrajectory, TrajectoryCommand, TrajectoryController
+from probdis_ros.motion.jtc import (
+    JtcTrajectory,
+    taken_trajectory,
+    TrajectoryCommand,
+    TrajectoryController,
+)
 from probdis_ros.motion.profiles import from_state
 from probdis_ros.motion.state_check import BadJointStateError, StateCheck
 from probdis_ros.planning.disentangle import Disentangler
@@ -491,6 +496,28 @@ def torque_block(held: bool) -> tuple[np.ndarray, np.ndarray, TrajectoryCommand]
     return q, v, [a.command for a in run.actions if isinstance(a, Send)][-1]
 
 
+@pytest.mark.parametrize('lag', [0.06, 0.0])
+def test_a_stop_from_states_without_velocities_of_an_arm_off_its_command_starts_at_its_speed(lag):
+    # an arm lagging its command otherwise than motion_delay is not "following" it: on states
+    # without velocities its stop was built from rest, and JTC (measured start) stepped the
+    # command of a joint moving at 1.04 rad/s to 0 in a period (a fuzzer: up to 2.2 rad/s)
+    loop = Disentangler(ARM, Planner(), Q1, max_paths=5, seed=0, goal_tolerance=0.04)
+    run = Run(ARM, loop, RunSettings(velocity_scaling=0.7), clock=lambda: run._now)
+    run.start(0.0, Q0)
+    run.on_plan(loop.next_path(Q0))
+    jtc, t = run.trajectory, 0.0
+    while t < 0.45 * jtc.duration:
+        t += 0.01
+        run.on_joint_state(t, jtc.sample(t - lag)[0])          # positions only
+    q, v, _ = jtc.sample(t - lag)                               # the arm's true state
+    assert not run.following and np.abs(v).max() > 1.0
+    run.actions.clear()
+    run.stop()
+    stop = [a.command for a in run.actions if isinstance(a, Send)][-1]
+    start = taken_trajectory(stop, t, q, v).sample(0.0)[1]      # JTC from the arm
+    assert np.abs(start - v).max() < 0.05
+
+
 def test_a_block_seen_by_its_torque_on_states_without_velocities_brakes_from_the_arms_motion():
     # a driver that sends no velocities: the arm on its command moves as the command says,
     # but a block its torque shows comes within d_dist of the command, where the arm still
@@ -540,27 +567,31 @@ def test_a_stop_during_a_free_retreat_after_a_block_brakes_ahead_not_back_to_the
     assert ahead > 0.1, f'the stop ends {ahead:.3f} rad along the motion of the arm'
 
 
-STOP_AT = 0.403     # [s] into a path at scaling 0.7, between two of JTC's updates
+STOP_AT = 1.403     # [s] into a path at scaling 0.7, between two of JTC's updates
+EPOCH = 1.0         # [s] JTC's first update (a clock at 0 would make a stamp of 0: none)
 
 
-def desired_stop_taken_late(latency: float, ticks: int) -> tuple[np.ndarray, list]:
+def desired_stop_taken_late(latency: float, ticks: int, sent_at: float = EPOCH,
+                            path_latency: float = 0.0) -> tuple[np.ndarray, list]:
     """
     Run a path with a desired start under the JTC model, stopped at STOP_AT, delivered late.
 
-    Returns JTC's position commands, one per period, and the stop's messages.
+    The path is sent at sent_at and delivered path_latency later; JTC updates every 10 ms
+    from EPOCH.  Returns JTC's position commands, one per period, and the stop's messages.
     """
     settings = RunSettings(velocity_scaling=0.7, jtc_start='desired')
     loop = Disentangler(ARM, Planner(), Q1, max_paths=5, seed=0, goal_tolerance=0.04)
-    clock = [0.0]
+    clock = [sent_at]
     run = Run(ARM, loop, settings, clock=lambda: clock[0])
     jtc = TrajectoryController(0.01, 'desired')
-    run.start(0.0, Q0)
+    run.start(sent_at, Q0)
     run.on_plan(loop.next_path(Q0))
-    deliveries = [(0.0, a.command) for a in run.actions if isinstance(a, Send)]
+    deliveries = [(sent_at + path_latency, a.command) for a in run.actions
+                  if isinstance(a, Send)]
     commands, stops = [], []
     for k in range(ticks):
-        t = k * 0.01
-        for when, command in [d for d in deliveries if d[0] <= t]:
+        t = EPOCH + k * 0.01
+        for when, command in [d for d in deliveries if d[0] <= t + 1e-12]:
             jtc.receive(command)
             deliveries.remove((when, command))
         commands.append(jtc.update(t, Q0 if k == 0 else commands[-1]))
@@ -581,11 +612,28 @@ def test_with_a_desired_start_a_stop_taken_late_brakes_the_command_smoothly(late
     # 8 and 20 ms of delivery); stamped, it brakes from where the command is when taken,
     # its speed changing by no more than the stop's own deceleration over the delay
     commands, _ = desired_stop_taken_late(latency, 80)
+    assert_braked_smoothly(commands)
+
+
+def assert_braked_smoothly(commands: np.ndarray) -> None:
     speed = np.diff(commands[:, 0]) / 0.01                        # A1, the joint that moves most
-    k = int(STOP_AT / 0.01)
+    k = round((STOP_AT - EPOCH) / 0.01)
     assert speed[k - 1] > 0.9                                     # it was moving fast
     assert speed[k:].min() > -1e-3                                # never back
     assert np.abs(np.diff(speed[k - 2:])).max() / 0.01 < 25.0     # rad/s^2: braking
+    assert np.abs(np.diff(commands, axis=0) / 0.01 / ARM.velocity_limits).max() <= 0.7 + 1e-6
+
+
+@pytest.mark.parametrize('sent_at, path_latency', [(EPOCH, 0.005), (EPOCH + 0.004, 0.0),
+                                                   (EPOCH + 0.004, 0.009)])
+def test_with_a_desired_start_a_path_from_rest_taken_late_is_stopped_smoothly(
+        sent_at, path_latency):
+    # a path from rest went unstamped: JTC ran it from its next update, the run modelled it
+    # from when it was sent, and a stop made from that model put JTC's command ahead by the
+    # delay (a fuzzer: A1 from 1.04 to 2.69 rad/s for a period, 1.8 x its velocity limit,
+    # the path taken 16 ms late); stamped, JTC runs it on the run's time line
+    commands, _ = desired_stop_taken_late(0.0, 80, sent_at, path_latency)
+    assert_braked_smoothly(commands)
 
 
 @pytest.mark.parametrize('latency', [0.2, 0.5])
