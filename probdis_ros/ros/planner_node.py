@@ -872,12 +872,12 @@ class PlannerNode(Node):
         tight = self.controller_setting.below_lag(dict(zip(
             self.joint_names, PATH_TOLERANCE_FLOOR + PATH_TOLERANCE_LAG * scaled)))
         if tight and not desired:
-            unchecked = '; '.join(filter(None, (unchecked, (
-                f"joint_trajectory_controller's path tolerance leaves no room for the arm's "
-                f'lag in free motion at this velocity_scaling ({tight} rad): where JTC holds '
-                f'mid-path, the path reads as blocked (README, "Pointing it at the real '
-                f'arm")'))))
-            self.get_logger().warning(unchecked)
+            lag = (f"joint_trajectory_controller's path tolerance leaves no room for the arm's "
+                   f'lag in free motion at this velocity_scaling ({tight} rad): where JTC '
+                   f'holds mid-path, the path reads as blocked (README, "Pointing it at the '
+                   f'real arm")')
+            self.get_logger().warning(lag)
+            unchecked = '; '.join(filter(None, (unchecked, lag)))
         planner = self._make_planner()
         self.fmap.c_fail = float(self.get_parameter('c_fail').value)
         loop = Disentangler(self.arm, planner, np.asarray(goal, dtype=float), self.fmap,
