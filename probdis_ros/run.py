@@ -465,8 +465,7 @@ class Run:
                 # off its command (a lag other than motion_delay, springing back after a
                 # block): as its positions move; taken at rest, a stop stepped a moving arm's
                 # command by up to 2.2 rad/s in a period (a fuzzer, scaling 0.7)
-                times, positions = zip(*self._recent)
-                self.measured_velocity = slope_of(np.array(times), np.array(positions))
+                self.measured_velocity = self._positions_slope()
         if not self.phase.active:
             return
         if self.detector is None:
@@ -491,8 +490,7 @@ class Run:
             # the command's velocity does not tell (a block its torque showed within d_dist of
             # the command: the retreat ran on into it by the command's braking distance, 0.15
             # rad at scaling 0.7); the arm's recent positions do
-            times, positions = zip(*self._recent)
-            self.measured_velocity = slope_of(np.array(times), np.array(positions))
+            self.measured_velocity = self._positions_slope()
         # a compliant arm stopped while pressed into something springs back or slides by up
         # to the gap it pressed with (seen on the physics mock: 0.17 rad after a blocked
         # retreat): that settling is no motion of another driver
@@ -673,6 +671,11 @@ class Run:
         if last is not None:
             return last
         return self.measured, self.measured_velocity, None
+
+    def _positions_slope(self) -> np.ndarray:
+        """Return the arm's velocity by its positions over VELOCITY_WINDOW (0: one state)."""
+        times, positions = zip(*self._recent)
+        return slope_of(np.array(times), np.array(positions))
 
     def _last_command(self, now: float) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
         """

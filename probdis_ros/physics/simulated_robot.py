@@ -411,10 +411,10 @@ def with_faults(faults: Mapping[str, float], settings: RobotSettings | None = No
         raise ValueError(f'no fault {unknown[0]!r} (one of {", ".join(FAULTS)})')
     robot = replace(settings or RobotSettings(),
                     **{k: float(v) for k, v in faults.items() if k in DRIVER_FAULTS})
+    per_joint = ('armature', 'stiffness')       # one value for every joint
     physics = replace(PhysicsSettings(), **{k: float(v) for k, v in faults.items()
-                                            if k in ('object_mass_error', 'grasp_stiffness',
-                                                     'damping_ratio', 'joint_friction')})
-    for name in ('armature', 'stiffness'):      # one value for every joint
+                                            if k in PHYSICS_FAULTS and k not in per_joint})
+    for name in per_joint:
         if name in faults:
             physics = replace(physics, **{name: (float(faults[name]),) * 7})
     return robot, physics
