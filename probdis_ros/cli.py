@@ -174,7 +174,6 @@ def cmd_experiment_sweep(args: argparse.Namespace) -> int:
         run_sweep,
         SETTINGS,
     )
-    from probdis_ros.sim.families import FAMILIES
 
     methods = _methods(args.methods)
     _check_output(args.out, '--out', folder=True)
@@ -185,11 +184,7 @@ def cmd_experiment_sweep(args: argparse.Namespace) -> int:
         if args.setting is not None or args.obstacles is not None:
             raise UsageError('--family runs entanglement families; it takes no --setting '
                              'or --obstacles')
-        families = list(FAMILIES) if args.family == 'all' else _split(args.family)
-        unknown = [f for f in families if f not in FAMILIES]
-        if unknown or not families:
-            raise UsageError(f'unknown family {(unknown or [args.family])[0]!r}; choose from '
-                             f'{", ".join(FAMILIES)} or all')
+        families = _families(args.family)
         _not_negative(args.seed, '--seed')        # the first world seed
         keys = family_keys(families, args.worlds, methods, args.seed)
     else:
@@ -214,8 +209,13 @@ def cmd_experiment_sweep(args: argparse.Namespace) -> int:
     if args.plan_time is not None:
         rrt['plan_time'] = _positive(args.plan_time, '--plan-time')
     progress = progress_line if sys.stderr.isatty() else None
-    report = run_sweep(keys, Path(args.out), args.max_paths, args.scheduler, args.workers,
-                       progress, rrt or None)
+    try:
+        report = run_sweep(keys, Path(args.out), args.max_paths, args.scheduler, args.workers,
+                           progress, rrt or None)
+    except KeyboardInterrupt:
+        print(f'\nprobdis experiment sweep: the finished episodes are kept in {args.out}; '
+              'the same command resumes with the others', file=sys.stderr)
+        raise
     print(f'{args.out}: {report.total} episodes, {report.skipped} already done, '
           f'{report.ran} run in {report.seconds:.0f} s')
     return 0
@@ -261,15 +261,16 @@ def cmd_experiment_bound(args: argparse.Namespace) -> int:
     if args.out:
         _check_output(args.out, '--out', folder=True)
     seeds = list(range(args.seed, args.seed + args.worlds))
+    paths = args.max_paths
+    with warnings.catch_warnings(record=True) as caught:     # (refuses before the bounds)
+        warnings.simplefilter('always')
+        methods = method_curves(records, seeds, paths)
     bounds, t0 = [], time.monotonic()
     for done, seed in enumerate(seeds, start=1):
         bounds.append(world_bound(seed))
-        progress_line(done, len(seeds), time.monotonic() - t0, 'worlds')
-    paths = args.max_paths
+        if sys.stderr.isatty():
+            progress_line(done, len(seeds), time.monotonic() - t0, 'worlds')
     curves = mean_curves(bounds, paths)
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter('always')
-        methods = method_curves(records, seeds, paths)
     for warning in caught:
         print(f'note: {warning.message}', file=sys.stderr)
     if records and not methods:
@@ -475,14 +476,16 @@ def cmd_experiment_robot(args: argparse.Namespace) -> int:
 
 
 def _split(text: str) -> list[str]:
-    return [part.strip() for part in text.split(',') if part.strip()]
+    """Return the comma-separated parts of text, each once (a name twice is run once)."""
+    return list(dict.fromkeys(part.strip() for part in text.split(',') if part.strip()))
 
 
 def _methods(text: str) -> list[Method]:
     """Return the methods of ``--methods``; refuse a list that names none (nothing to run)."""
     from probdis_ros.planning.methods import Method
 
-    methods = [Method.parse(m) for m in _split(text)]
+    # each method once, however spelled (informed and informed:adfhij are one)
+    methods = list({str(m): m for m in map(Method.parse, _split(text))}.values())
     if not methods:
         raise UsageError(f'--methods {text!r} names no method ({METHODS_HELP})')
     return methods
@@ -740,6 +743,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
     from probdis_ros.model.path_cost import path_success_probability
     from probdis_ros.model.table import ROBOT_TABLE
     from probdis_ros.planning import Method, RRTSettings
+    from probdis_ros.planning.prob_rrt import ROBOT_JOINT_MARGIN
     from probdis_ros.planning.seeds import PLANNER, stream
 
     if args.plan_time is not None:
@@ -747,7 +751,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
     _positive(args.delta, '--delta')
     _not_negative(args.length_weight, '--length-weight')
     _not_negative(args.seed, '--seed')
-    method = Method.parse(args.method)
+    method = Method.parse(args.method).checked_for_map_file('probdis plan')
     if method.name == 'epsilon':
         raise UsageError('epsilon does not plan on a map; use probabilistic, hard:Y or '
                          'informed')
@@ -767,8 +771,11 @@ def cmd_plan(args: argparse.Namespace) -> int:
             raise UsageError(f'--{name} needs {arm.n_joints} joint values for a '
                              f'{fmap.task_space.value} map, got {len(config)}')
         ends.append(config)
+    # the iiwa keeps the planner node's margin from its limits (a via point on a limit ends
+    # the driver's session); the 2-D simulator's arm, as sim, none
     settings = RRTSettings(iterations=args.iterations, delta=args.delta,
-                           plan_time=args.plan_time or 0.0)
+                           plan_time=args.plan_time or 0.0,
+                           joint_margin=0.0 if setting == '2d' else ROBOT_JOINT_MARGIN)
     planner = method.planner(arm, settings, args.length_weight)
     plan = planner.plan(ends[0], ends[1], fmap, stream(args.seed, PLANNER))
     if plan is None:
@@ -777,13 +784,15 @@ def cmd_plan(args: argparse.Namespace) -> int:
         success = path_success_probability(arm, fmap, plan.path, args.delta)
         doc = {'path': plan.path.tolist(), 'cost': plan.cost, 'success_probability': success,
                'plan_time_s': plan.plan_time_s}
+    doc['arm'] = arm.name                   # a 2-D map plans for the simulator's planar arm
     if args.json:
         _print_json(doc)
         return 0 if plan is not None else 1
     if plan is None:
         print(f'{args.map}: {method}: no feasible path')
         return 1
-    print(f'{args.map}: {len(fmap)} failures, {method}: {len(plan.path)} via points, cost '
+    print(f'{args.map}: {len(fmap)} failures, the {arm.name} arm ({fmap.task_space.value} '
+          f'map), {method}: {len(plan.path)} via points, cost '
           f'{plan.cost:.4f}, success probability {doc["success_probability"]:.3f}, planned '
           f'in {plan.plan_time_s:.3f} s')
     for q in plan.path:

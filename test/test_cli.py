@@ -148,7 +148,8 @@ def test_plan_prints_a_path_on_a_saved_map(probdis, tmp_path):
     args = ('plan', '--map', str(tmp_path / 'map.json'), '--start', *start, '--goal', *goal,
             '--iterations', '30', '--seed', '2', '--json')
     doc = json.loads(probdis(*args).stdout)
-    assert list(doc) == ['path', 'cost', 'success_probability', 'plan_time_s']
+    assert list(doc) == ['path', 'cost', 'success_probability', 'plan_time_s', 'arm']
+    assert doc['arm'] == 'planar'       # a 2-D map: the simulator's arm, said so
     assert doc['path'][0] == [float(v) for v in start]
     assert doc['path'][-1] == [float(v) for v in goal]
     assert 0 < doc['success_probability'] <= 1 and doc['cost'] > 0
@@ -185,6 +186,28 @@ def test_plan_keeps_the_iiwa_above_its_table_as_the_planner_node_does(probdis, t
     outside = ['4.0', *start[1:]]
     result = probdis(*args[:4], *outside, *args[11:], check=False)
     assert result.returncode == 2 and 'A1 at 4 rad is outside its limits' in result.stderr
+    # the node's margin from the joint limits: informed's probes from a wrist near its limit
+    # put via points on it (the driver ends its session there); a map of 19 failures about
+    # the workspace and 10 on the straight way
+    rng = np.random.default_rng(4)
+    pose = arm.fk(arm.random_configurations(rng, 19))
+    for x, q in zip(pose.positions, pose.orientations):
+        fmap.add(x, rng.normal(size=3), q)
+    ends = np.array([[0.3, 0.5, 0.0, -1.2, 0.0, 0.8, 0.0], [-0.9, 0.4, 0.3, -1.0, 0.5, 1.0, 0.4]])
+    pose = arm.fk(ends[0] + np.linspace(0, 1, 10)[:, None] * (ends[1] - ends[0]))
+    for x, q in zip(pose.positions, pose.orientations):
+        fmap.add(x, np.array([0.0, 0.0, 1.0]), q)
+    fmap.save(tmp_path / 'map.json')
+    ends[0, 5] = arm.upper[5] - 0.05
+    doc = json.loads(probdis(*args[:3], '--start', *map(str, ends[0]), '--goal',
+                             *map(str, ends[1]), '--iterations', '100', '--seed', '0',
+                             '--method', 'informed', '--json').stdout)
+    via = np.array(doc['path'])[1:-1]
+    assert doc['arm'] == 'iiwa14' and len(via)
+    assert np.minimum(via - arm.lower, arm.upper - via).min() >= 0.035 - 1e-9
+    # the ideas that change what the map learns do nothing on a map file: refused
+    result = probdis(*args, '--method', 'informed:ab', check=False)
+    assert result.returncode == 2 and 'probdis plan runs the informed ideas' in result.stderr
 
 
 def test_the_robot_experiment_offline_is_deterministic_and_takes_detector_overrides(

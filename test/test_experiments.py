@@ -201,6 +201,11 @@ def test_family_worlds_are_seeds_from_the_sweep_seed_and_go_world_by_world():
     assert {(k.family, k.world, k.world_seed) for k in keys} == {
         (f, w, 1000 + w) for f in ('open_box', 'clutter') for w in range(3)}
     assert all(k.setting == '3d-orient' for k in keys)
+    # a family or a method given twice (or spelled two ways) runs once
+    twice = family_keys(['clutter', 'clutter'], 2,
+                        [Method.parse('informed'), Method.parse('informed:adfhij')], 0)
+    assert [k.name for k in twice] == ['clutter/0/informed:adfhij', 'clutter/1/informed:adfhij']
+    assert len(episode_keys(['2d', '2d'], [1, 1], 2, methods + methods, 3)) == 4
     # the settings' seeds are unchanged by the families (same hash as before)
     assert episode_keys(['2d'], [1], 1, methods[:1], 3)[0].world_seed == zlib.crc32(b'3/2d/1/0')
 
@@ -256,6 +261,9 @@ def test_a_success_rate_of_all_or_none_gets_the_exact_interval_not_a_point():
     assert paired_ci(np.zeros(100)) == pytest.approx((low - 1.0, 1.0 - low))
     diffs = np.array([1.0] * 3 + [0.0] * 97)
     assert paired_ci(diffs) == bootstrap_ci(diffs)
+    # every pair won (or lost): as 100 of 100, not a point at 1
+    assert paired_ci(np.ones(100)) == pytest.approx((low, 1.0))
+    assert paired_ci(-np.ones(100)) == pytest.approx((-1.0, -low))
     curve = success_curve([{'success': True, 'paths': 1}] * 20, max_paths=3)
     assert curve['rate'] == [1.0] * 3 and curve['low'][0] == pytest.approx(0.025 ** (1 / 20))
 
@@ -479,6 +487,24 @@ def test_a_sweep_in_another_directory_is_compared_world_by_world(tmp_path):
     with pytest.raises(ValueError, match=f'probabilistic on world 3 of 2d is in both {paper} '
                        f'and {later}'):
         write_report(paper, [later])
+    # nor is a directory read twice, or a record twice in one (two sweeps wrote to one --out)
+    with pytest.raises(ValueError, match=f'world 0 of 2d is twice in {paper}'):
+        write_report(paper, [paper / '..' / 'paper'])
+    with (paper / EPISODES_FILE).open('a') as stream:
+        stream.write(json.dumps({**report_record(0), 'success': False}) + '\n')
+    with pytest.raises(ValueError, match=f'world 0 of 2d is twice in {paper}'):
+        write_report(paper)
+
+
+def test_the_report_refuses_methods_allowed_different_numbers_of_paths(tmp_path):
+    paper, later = tmp_path / 'paper', tmp_path / 'later'
+    for folder, method, paths in ((paper, 'probabilistic', 2), (later, 'informed', 20)):
+        folder.mkdir()
+        (folder / EPISODES_FILE).write_text(''.join(
+            json.dumps({**report_record(w, method), 'max_paths': paths}) + '\n'
+            for w in range(3)))
+    with pytest.raises(ValueError, match=r'allowed 2 paths .* and 20 .*one --max-paths'):
+        write_report(paper, [later])
 
 
 def test_the_report_names_a_record_that_is_no_episode_and_an_unwritable_summary(tmp_path):
@@ -488,6 +514,11 @@ def test_the_report_names_a_record_that_is_no_episode_and_an_unwritable_summary(
     assert result.returncode == 2 and result.stderr.count('\n') == 1, result.stderr
     assert result.stderr.startswith('probdis experiment report: error: ') and \
         'record 2 is not an episode record' in result.stderr
+    # a field of the wrong kind (edited by hand): named, not a numpy traceback
+    episodes.write_text(json.dumps({**report_record(0), 'paths': '3'}) + '\n')
+    result = run_report(tmp_path)
+    assert result.returncode == 2 and result.stderr.count('\n') == 1, result.stderr
+    assert "record 1 has a 'paths' of '3'" in result.stderr
     episodes.write_text(json.dumps(report_record(0)) + '\n')
     (tmp_path / 'summary.json').mkdir()           # where the summary goes: not writable
     result = run_report(tmp_path)

@@ -48,6 +48,10 @@ BOOTSTRAP_SEED = 0
 #: The fields the report reads from every episode record (``sweep.run_sweep`` writes them).
 EPISODE_FIELDS = ('setting', 'obstacles', 'method', 'max_paths', 'success', 'paths',
                   'plan_times_s', 'wall_s')
+#: The kinds of the fields the report computes with (a hand-edited "3" refused, not summed).
+FIELD_TYPES = {'setting': (str,), 'obstacles': (int,), 'method': (str,), 'max_paths': (int,),
+               'success': (bool,), 'paths': (int,), 'plan_times_s': (list,),
+               'wall_s': (int, float)}
 
 
 def bootstrap_ci(values: np.ndarray, samples: int = BOOTSTRAP_SAMPLES,
@@ -96,13 +100,17 @@ def paired_ci(differences: np.ndarray, level: float = 0.95) -> tuple[float, floa
 
     The percentile bootstrap, but where every pair ended the same (all differences 0): there
     it has no width; the difference is at most the share of pairs that differ, none of n
-    seen: ``none_of_bound(n)`` either way (0.036 for 100).
+    seen: ``none_of_bound(n)`` either way (0.036 for 100). Where every pair differs alike
+    (all 1, or all -1), the pairs that would not are bounded the same way.
     """
     differences = np.asarray(differences, dtype=float)
-    if len(differences) == 0 or np.any(differences != 0.0):
+    if len(differences) == 0 or np.any(differences != differences[0]):
         return bootstrap_ci(differences, level=level)
     bound = none_of_bound(len(differences), level)
-    return -bound, bound
+    if differences[0] == 0.0:
+        return -bound, bound
+    # every pair won (or lost) alike: as success_ci's n of n, the rest at most bound
+    return (1.0 - bound, 1.0) if differences[0] > 0.0 else (-1.0, bound - 1.0)
 
 
 def success_curve(records: list[dict], max_paths: int) -> dict:
@@ -440,7 +448,16 @@ def check_records(records: list, source: str | Path) -> list[dict]:
         if missing:
             raise ValueError(f'{source}: record {number} is not an episode record (no '
                              f'{missing[0]!r})')
+        wrong = [f for f, kinds in FIELD_TYPES.items() if not _of_kind(record[f], kinds)]
+        if wrong:
+            raise ValueError(f'{source}: record {number} has a {wrong[0]!r} of '
+                             f'{record[wrong[0]]!r} (not of the kind the sweep writes)')
     return records
+
+
+def _of_kind(value: object, kinds: tuple[type, ...]) -> bool:
+    """Return whether value is of one of kinds (True is no int here, as JSON tells them)."""
+    return isinstance(value, kinds) and (bool in kinds or not isinstance(value, bool))
 
 
 def episode_key(record: dict) -> tuple:
@@ -455,9 +472,11 @@ def read_sweeps(directory: str | Path, others: Sequence[str | Path] = ()) -> lis
 
     Other directories bring other methods on the same worlds (a sweep run later, into its
     own directory), so that the report pairs them by world with DIR's; an episode (cell,
-    method, world) in two of them is refused, naming both.
+    method, world) read twice is refused, naming where (two sweeps that wrote into one
+    directory, or a directory given twice), and so are episodes allowed different numbers
+    of paths (a method allowed 20 would be paired with one allowed 2).
     """
-    records, seen = [], {}
+    records, seen, budgets = [], {}, {}
     for source in [Path(directory), *map(Path, others)]:
         found = check_records(read_episodes(source / EPISODES_FILE), source / EPISODES_FILE)
         if not found:
@@ -465,10 +484,18 @@ def read_sweeps(directory: str | Path, others: Sequence[str | Path] = ()) -> lis
                              'sweep first)')
         for record in found:
             key = episode_key(record)
-            if seen.setdefault(key, source) != source:
+            if key in seen:
+                where = f'twice in {source}' if seen[key] == source.resolve() else \
+                    f'in both {seen[key]} and {source.resolve()}'
                 raise ValueError(f'{record["method"]} on world {key[-1][0]} of '
-                                 f'{key[0] or key[1]} is in both {seen[key]} and {source}: '
-                                 '--with takes directories of other methods')
+                                 f'{key[0] or key[1]} is {where}: a report reads each '
+                                 'episode once (--with takes directories of other methods)')
+            seen[key] = source.resolve()
+            budgets.setdefault(record['max_paths'], source)
+        if len(budgets) > 1:
+            (first, where), (other, there) = list(budgets.items())[:2]
+            raise ValueError(f'episodes allowed {first} paths ({where}) and {other} '
+                             f'({there}): a report compares methods at one --max-paths')
         records += found
     return records
 

@@ -81,9 +81,13 @@ class EpisodeKey:
 
 def episode_keys(settings: Iterable[str], obstacles: Iterable[int], worlds: int,
                  methods: Iterable[Method], seed: int) -> list[EpisodeKey]:
-    """Return every episode of a sweep, world by world (so partial sweeps compare methods)."""
-    return [EpisodeKey(s, n, w, str(m), seed) for s in settings for n in obstacles
-            for w in range(worlds) for m in methods]
+    """
+    Return every episode of a sweep, world by world (so partial sweeps compare methods).
+
+    Each once: a setting, count or method given twice (or spelled two ways) runs once.
+    """
+    return list(dict.fromkeys(EpisodeKey(s, n, w, str(m), seed) for s in settings
+                              for n in obstacles for w in range(worlds) for m in methods))
 
 
 def family_keys(families: Iterable[str], worlds: int, methods: Iterable[Method],
@@ -91,12 +95,13 @@ def family_keys(families: Iterable[str], worlds: int, methods: Iterable[Method],
     """
     Return every episode of a family sweep: worlds of seeds seed..seed+worlds-1.
 
-    World by world across the families, so that a partial sweep has as many worlds of each.
+    World by world across the families, so that a partial sweep has as many worlds of each;
+    each episode once, as :func:`episode_keys`.
     """
     from probdis_ros.sim.families import SETTING
 
-    return [EpisodeKey(SETTING, 0, w, str(m), seed, family) for w in range(worlds)
-            for family in families for m in methods]
+    return list(dict.fromkeys(EpisodeKey(SETTING, 0, w, str(m), seed, family)
+                              for w in range(worlds) for family in families for m in methods))
 
 
 def run_episode_record(key: EpisodeKey, max_paths: int, rrt: dict | None = None) -> dict:
@@ -239,9 +244,12 @@ def run_sweep(keys: list[EpisodeKey], out: Path, max_paths: int = 20,
         cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1,
                                processes=True, dashboard_address=None, host='127.0.0.1')
         client = Client(cluster)
+    # a shared scheduler keeps results by task key: another sweep's planner is another task
+    planner = zlib.crc32(json.dumps(rrt or {}, sort_keys=True).encode())
     try:
         futures = [client.submit(run_episode_record, key, max_paths, rrt,
-                                 key=f'episode-{key.name}-{key.sweep_seed}-{max_paths}',
+                                 key=f'episode-{key.name}-{key.sweep_seed}-{max_paths}-'
+                                     f'{planner}',
                                  pure=False) for key in todo]
         with path.open('a') as stream:
             for finished, future in enumerate(as_completed(futures), start=1):

@@ -147,11 +147,15 @@ class Method:
         if self.name == 'probabilistic' and self.value is not None:
             raise ValueError(f'{self}: the planner node takes C_FAIL from its c_fail parameter '
                              f'(method probabilistic, c_fail {_text(self.value)})')
+        return self.checked_for_map_file('the planner node')
+
+    def checked_for_map_file(self, planner: str) -> Method:
+        """Return this method if it plans on a map file's failures alone; else ValueError."""
         foreign = sorted(set(self.idea_letters) - set(NODE_IDEAS))
         if foreign:
-            raise ValueError(f'{self}: the planner node runs the informed ideas '
-                             f'{NODE_IDEAS!r} only ({", ".join(foreign)} change what the map '
-                             'learns, and its map file keeps failures only)')
+            raise ValueError(f'{self}: {planner} runs the informed ideas {NODE_IDEAS!r} only '
+                             f'({", ".join(foreign)} change what the map learns, and its map '
+                             'file keeps failures only)')
         return self
 
     @classmethod
