@@ -471,7 +471,7 @@ def cmd_experiment_robot(args: argparse.Namespace) -> int:
         if baseline is not None:
             print(f'\nagainst the same runs in {args.against}:')
             print(paired_table(records, baseline, [str(m) for m in methods]), end='')
-        print(f'runs and bags in {args.out}')
+        print(f'runs in {args.out}' if args.offline else f'runs and bags in {args.out}')
     return 0
 
 
@@ -1384,7 +1384,7 @@ def build_parser() -> argparse.ArgumentParser:
                        'as the mock can (commands may then be taken late)')
     robot.add_argument('--methods', default='epsilon:0.2,hard:0.01,probabilistic,informed',
                        help=METHODS_HELP)
-    robot.add_argument('--out', default='results/robot', help='directory of robot_runs.jsonl '
+    robot.add_argument('--out', default='out/robot', help='directory of robot_runs.jsonl '
                        'and the bags; runs already there are skipped')
     robot.add_argument('--velocity-scaling', type=float, default=0.2,
                        help='of the planner (0.2, its default on the real arm; at most 0.7)')
@@ -1398,9 +1398,10 @@ def build_parser() -> argparse.ArgumentParser:
     robot.add_argument('--fault', action='append', metavar='NAME=VALUE',
                        help="a fault of the mock in every run, by its node parameter's name: "
                        'noise [rad], effort_noise [Nm], latency [s], command_latency [s], '
-                       'speed_monitor [m/s], '
-                       'object_mass_error [kg], '
-                       'armature [kg m^2], grasp_stiffness [Nm/rad]; or the robot '
+                       "speed_monitor [m/s], collision_torque [Nm: KUKA's collision "
+                       'detection], object_mass_error [kg], '
+                       'armature [kg m^2], grasp_stiffness [Nm/rad], joint_friction [Nm]; '
+                       'or the robot '
                        "application's joint impedance: stiffness [Nm/rad], damping_ratio "
                        '(repeatable; README '
                        '"Parameters")')

@@ -195,7 +195,8 @@ def plot_replay(result, out: str | Path, d_dist: float) -> Path:
         ax3.plot(xyz[:, 0], xyz[:, 1], xyz[:, 2], color='tab:blue', lw=1)
     if result.blocks:
         x = np.array([b.x for b in result.blocks])
-        ax3.scatter(x[:, 0], x[:, 1], x[:, 2], color='tab:red', s=20, label='failures')
+        ax3.scatter(x[:, 0], x[:, 1], x[:, 2], color='black', marker='x', s=30,
+                    label='blocks')
         ax3.legend(fontsize=8)
     ax3.set_xlabel('x [m]')
     ax3.set_ylabel('y [m]')
@@ -212,9 +213,9 @@ def plot_replay(result, out: str | Path, d_dist: float) -> Path:
 
 
 def _mark_blocks(ax, blocks) -> None:
-    """Draw a vertical red line at each block's time."""
+    """Draw a vertical black dotted line at each block's time (no joint's colour)."""
     for k, block in enumerate(blocks):
-        ax.axvline(block.t, color='tab:red', lw=1, label='block' if k == 0 else None)
+        ax.axvline(block.t, color='black', ls=':', lw=1.2, label='block' if k == 0 else None)
 
 
 def _grid(summary: dict):

@@ -171,6 +171,27 @@ def test_start_is_refused_while_the_controller_starts_commands_elsewhere_than_mo
     wait_for(lambda: ros.call('start').success, 10, 'start once they agree')
 
 
+def test_a_start_before_the_controller_answered_is_checked_once_it_answers(ros, tmp_path):
+    # the demo starts its fresh planner moments after it came up: the start warned that the
+    # controller could not be read (not asked yet), and a controller that starts commands
+    # elsewhere than modelled, answering a moment later, went unchecked for the whole run
+    import rclpy
+
+    node = planner(ros, tmp_path, controller_node='/lbr/joint_trajectory_controller')
+    steady_states(ros)
+    wait_for(lambda: node.measured is not None, 10, 'joint states')
+    assert node.controller_setting.first_answer_due()
+    response = ros.call('start')
+    assert response.success and 'warning' not in response.message, response.message
+    assert 'has not answered yet' in response.message
+    jtc = rclpy.create_node('joint_trajectory_controller', namespace='/lbr',
+                            context=ros.context)
+    jtc.declare_parameter('interpolate_from_desired_state', True)
+    ros.add(jtc)
+    wait_for(lambda: node.run.outcome == 'stopped', 10, 'the run stopped')
+    assert 'starts each command from its last command' in node.run.message, node.run.message
+
+
 def test_a_planner_that_models_the_last_command_starts_only_once_the_controller_agrees(
         ros, tmp_path):
     node = planner(ros, tmp_path, interpolate_from_desired_state=True,
@@ -203,8 +224,10 @@ def test_a_planner_that_models_the_last_command_starts_only_once_the_controller_
 def test_a_planner_that_models_the_measured_state_starts_unconfirmed(ros, tmp_path):
     # the measured start needs no confirmation (the node warns): a controller that starts
     # from its last command then steps back to the arm, as JTC's default does
-    planner(ros, tmp_path, controller_node='/lbr/joint_trajectory_controller')
+    node = planner(ros, tmp_path, controller_node='/lbr/joint_trajectory_controller')
     steady_states(ros)
+    # (moments after the node came up the controller may just not be found yet: below)
+    wait_for(lambda: not node.controller_setting.first_answer_due(), 10, 'the first answer')
     answers = []
     wait_for(lambda: answers.append(ros.call('start')) or answers[-1].success, 10, 'start')
     # the user who started it hears of it, not the log alone

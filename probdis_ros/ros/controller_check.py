@@ -43,6 +43,9 @@ PARAMETER = 'interpolate_from_desired_state'
 STARTS = (PARAMETER, 'open_loop_control')
 #: How often the controller's parameters are asked for [s] (wall clock).
 POLL = 2.0
+#: [s] how long after the node came up a controller that has not answered yet is still being
+#: found (discovery, the first call): a start then is checked once it answers, not warned.
+FIRST_ANSWER = 2 * POLL
 
 
 def _value(values: list) -> bool | float | None:
@@ -76,12 +79,18 @@ class ControllerSetting:
         self._batch = 0                       # answers of an abandoned batch are dropped
         self._futures: list = []
         self._answered_at = -float('inf')
+        self._created = time.monotonic()
         self._client = None
         if self.skipped:
             self.problem = 'controller_node is empty: not checked'
         else:
             self._client = node.create_client(GetParameters,
                                               f'{self.controller_node}/get_parameters')
+
+    def first_answer_due(self) -> bool:
+        """Tell whether the controller may not have been found yet: the node is that young."""
+        return self._client is not None and self._answered_at == -float('inf') and \
+            time.monotonic() - self._created < FIRST_ANSWER
 
     def poll(self) -> None:
         """Ask the controller again when due (call from a timer; never blocks)."""
@@ -94,6 +103,8 @@ class ControllerSetting:
             for future in self._futures:
                 self._client.remove_pending_request(future)
             self._waiting, self._batch, self._futures = 0, self._batch + 1, []
+            if self._answered_at == -float('inf'):
+                self.problem = f'{self.controller_node} did not answer within {POLL:g} s'
         if time.monotonic() - self._answered_at > 2.5 * POLL:
             self.value = None          # an answer this old may no longer hold
             if self.problem == '':

@@ -437,6 +437,7 @@ class PlannerNode(Node):
             String(data=json.dumps(self.instance)))
         self.controller_setting = ControllerSetting(
             self, self.get_parameter('controller_node').value, self.joint_names)
+        self.controller_due = False       # a run started before the controller answered
         self.create_service(Trigger, '~/start', self._on_start)
         self.create_service(Trigger, '~/stop', self._on_stop)
         self.create_service(Trigger, '~/reset_map', self._on_reset_map)
@@ -863,11 +864,15 @@ class PlannerNode(Node):
         if refusal:
             return False, refusal
         unchecked = ''
-        if self.controller_setting.value is None:
-            unchecked = (f"could not read joint_trajectory_controller's "
-                         f'interpolate_from_desired_state ({self.controller_setting.problem}): '
-                         f'make sure it is {str(desired).lower()}, as this planner models it')
+        # a start moments after the node came up: the controller is checked once it answers
+        self.controller_due = self.controller_setting.value is None and \
+            self.controller_setting.first_answer_due()
+        if self.controller_setting.value is None and not self.controller_due:
+            unchecked = self._controller_unknown(desired)
             self.get_logger().warning(unchecked)
+        checked_later = (f'; {self.controller_setting.controller_node} has not answered yet '
+                         '(this planner came up moments ago): the run stops if it starts '
+                         'commands elsewhere than modelled' if self.controller_due else '')
         scaled = self.arm.velocity_limits * self.get_parameter('velocity_scaling').value
         tight = self.controller_setting.below_lag(dict(zip(
             self.joint_names, PATH_TOLERANCE_FLOOR + PATH_TOLERANCE_LAG * scaled)))
@@ -904,7 +909,7 @@ class PlannerNode(Node):
                       running_sent_at)
         if self.run.outcome == 'succeeded':
             return True, f'already at the goal ({np.round(start, 3).tolist()}): nothing to do'
-        started = f'disentangling from {np.round(start, 3).tolist()}'
+        started = f'disentangling from {np.round(start, 3).tolist()}{checked_later}'
         return True, f'{started}; warning: {unchecked}' if unchecked else started
 
     # -- recording -----------------------------------------------------------------------
@@ -1196,6 +1201,25 @@ class PlannerNode(Node):
             self.io.submit(self._keep_finished_map, self.bag_path, finished)
             self._publish_markers(None)
 
+    def _controller_unknown(self, desired: bool) -> str:
+        return (f"could not read joint_trajectory_controller's interpolate_from_desired_state "
+                f'({self.controller_setting.problem}): make sure it is '
+                f'{str(desired).lower()}, as this planner models it')
+
+    def _check_controller_late(self) -> None:
+        """Check a run started before the controller's first answer, once it is in."""
+        setting = self.controller_setting
+        if not self.controller_due or (setting.first_answer_due() and setting.value is None):
+            return
+        self.controller_due = False
+        desired = self.run is not None and self.run.settings.jtc_start == 'desired'
+        refusal = setting.refusal(desired).removesuffix('; not starting')
+        if refusal and self.active:
+            self._guarded(self.run.stop, f'{refusal}: the run started before it answered; '
+                          'stopped')
+        elif setting.value is None:
+            self.get_logger().warning(self._controller_unknown(desired))
+
     def _tick(self) -> None:
         self._note_stall()
         now = self._now()
@@ -1213,6 +1237,7 @@ class PlannerNode(Node):
         if time.monotonic() - self._graph_checked >= GRAPH_CHECK:
             self._check_graph()
         self.controller_setting.poll()
+        self._check_controller_late()
         if self.run is None:
             return
         clock = self._clock_problem() if self.active else ''
