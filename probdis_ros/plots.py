@@ -95,7 +95,7 @@ def plot_episode(result, out: str | Path) -> Path:
     Draw a 2-D episode like the paper's Fig. 2.
 
     The arm at start (grey) and goal (green), the end-effector traces of the executed paths
-    (blue, the last one darkest), the planned path of the last attempt (dashed), failures
+    (blue, the last one darkest), the planned path of the last attempt (dashed orange), failures
     (red), the final probability map (dark = likely blocked) and the hidden obstacles
     (black outlines, for the viewer only).
     """
@@ -113,15 +113,18 @@ def plot_episode(result, out: str | Path) -> Path:
     fig, ax = plt.subplots(figsize=(6.5, 6))
     grid = probability_grid(result.loop.fmap, extent, resolution=240)
     ax.imshow(grid, origin='lower', extent=extent, cmap='gray_r', vmin=0.0, vmax=1.0)
-    for obstacle in world.obstacles:
-        ax.add_patch(Circle(obstacle.center, obstacle.radius, fill=False, color='black', lw=1.2))
+    for k, obstacle in enumerate(world.obstacles):
+        ax.add_patch(Circle(obstacle.center, obstacle.radius, fill=False, color='black', lw=1.2,
+                            label='hidden obstacles' if k == 0 else None))
     for k, trace in enumerate(result.traces):
         xy = arm.fk(trace).positions
         alpha = 0.25 + 0.75 * (k + 1) / len(result.traces)
-        ax.plot(xy[:, 0], xy[:, 1], color='tab:blue', alpha=alpha, lw=1.5)
-    if result.loop.attempts:
+        ax.plot(xy[:, 0], xy[:, 1], color='tab:blue', alpha=alpha, lw=1.5,
+                label='executed paths' if k == len(result.traces) - 1 else None)
+    if result.loop.attempts:     # (over the last trace, which it is where it got through)
         planned = arm.fk(_dense(result.loop.attempts[-1].path)).positions
-        ax.plot(planned[:, 0], planned[:, 1], '--', color='tab:blue', lw=1, label='last plan')
+        ax.plot(planned[:, 0], planned[:, 1], '--', color='tab:orange', lw=1,
+                label='last plan', zorder=3)
     arms = ((world.start, 'grey', 'start'), (world.goal, 'tab:green', 'goal'))
     for config, color, label in arms:
         links = arm.link_points(config)
@@ -135,6 +138,8 @@ def plot_episode(result, out: str | Path) -> Path:
     ax.set_xlim(extent[:2])
     ax.set_ylim(extent[2:])
     ax.set_aspect('equal')
+    ax.set_xlabel('x (links of 0.1)')
+    ax.set_ylabel('y')
     ax.legend(loc='lower left', fontsize=8)
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)

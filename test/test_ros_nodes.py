@@ -234,6 +234,19 @@ def test_a_planner_that_models_the_measured_state_starts_unconfirmed(ros, tmp_pa
     assert 'warning: could not read' in answers[-1].message, answers[-1].message
 
 
+def test_planner_sizes_that_would_exhaust_memory_are_refused(ros, tmp_path):
+    # a round draws K x |C_RAND| samples at once, about 80 B each: the node took 1e5 x 1e5
+    node = planner(ros, tmp_path, method='probabilistic')
+    result = node.set_parameters_atomically([Parameter('iterations', value=100000),
+                                             Parameter('n_random', value=1000)])
+    assert not result.successful and 'iterations x n_random must be at most' in result.reason
+    assert node.set_parameters([Parameter('iterations', value=20000)])[0].successful
+    # informed runs 8 K per tree: the same K is too much with it
+    result = node.set_parameters([Parameter('method', value='informed')])[0]
+    assert not result.successful and 'planner: iterations x n_random' in result.reason
+    assert node.get_parameter('method').value == 'probabilistic'
+
+
 def test_bad_goals_are_refused(ros, tmp_path):
     node = planner(ros, tmp_path)
     outside = GOAL.copy()

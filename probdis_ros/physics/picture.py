@@ -18,9 +18,9 @@ A picture of a physics run without RViz: the scene, the flange path and the fail
 
 Three views of one figure: a 3-D view, from above (x-y) and from the side (x-z).
 Obstacles are drawn as the scene file places them (grey rigid, orange yielding), the
-flange path as the arm moved (blue, from the start o to the end x), the goal's flange
-position as a star, and every failure as a red arrow in the direction the object was
-blocked.  matplotlib only (Agg), so it draws on a robot PC or in CI alike.
+flange path as the arm moved (blue, from the start o to the end x, drawn over the goal),
+the goal's flange position as a star, and every failure as a red arrow in the direction
+the object was blocked.  matplotlib only (Agg), so it draws on a robot PC or in CI alike.
 """
 
 from __future__ import annotations
@@ -80,7 +80,7 @@ def plot_scene_run(scene, flange: np.ndarray, failures: list[tuple[np.ndarray, n
     """Draw scene, flange path ``(N, 3)`` and failures ``[(x, v), ...]``; return out."""
     import matplotlib
     matplotlib.use('Agg')
-    from matplotlib.patches import Polygon
+    from matplotlib.patches import Patch, Polygon
     import matplotlib.pyplot as plt
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
     from probdis_ros.plots import thin_3d_ticks
@@ -110,10 +110,11 @@ def plot_scene_run(scene, flange: np.ndarray, failures: list[tuple[np.ndarray, n
     for ax, axes in panels:
         ax.plot(*flange[:, axes].T, color='tab:blue', lw=1.5, label='flange path')
         ax.plot(*flange[0, axes], 'o', color='tab:blue', ms=7, label='start')
-        ax.plot(*flange[-1, axes], 'x', color='tab:blue', ms=9, mew=2, label='end')
         if goal_flange is not None:
             ax.plot(*np.asarray(goal_flange)[list(axes)], '*', color='tab:green', ms=13,
                     label='goal')
+        # over the goal's star, where a run that got out ends
+        ax.plot(*flange[-1, axes], 'x', color='navy', ms=9, mew=2, label='end', zorder=5)
         for k, (x, v) in enumerate(failures):
             x, v = np.asarray(x), np.asarray(v) / max(np.linalg.norm(v), 1e-12)
             tip = x + ARROW * v
@@ -123,6 +124,7 @@ def plot_scene_run(scene, flange: np.ndarray, failures: list[tuple[np.ndarray, n
     ax3.set_xlabel('x [m]')
     ax3.set_ylabel('y [m]')
     ax3.set_zlabel('z [m]')
+    ax3.set_title('in 3-D')
     thin_3d_ticks(ax3)
     for ax, (a, b), name in zip(views, [('x', 'y'), ('x', 'z')], ['from above', 'from the side']):
         ax.set_xlabel(f'{a} [m]')
@@ -130,7 +132,12 @@ def plot_scene_run(scene, flange: np.ndarray, failures: list[tuple[np.ndarray, n
         ax.set_aspect('equal', adjustable='datalim')
         ax.set_title(name)
         ax.grid(alpha=0.3)
-    views[1].legend(loc='upper left', bbox_to_anchor=(1.02, 1.0), fontsize=8)
+    handles = views[1].get_legend_handles_labels()[0] + [
+        Patch(color=colour, alpha=0.45, label=name)
+        for colour, name in (('0.55', 'obstacles (hidden from the planner)'),
+                             ('tab:orange', 'yielding obstacles'))
+        if any(c == colour for _, c in shapes)]
+    views[1].legend(handles=handles, loc='upper left', bbox_to_anchor=(1.02, 1.0), fontsize=8)
     fig.suptitle(title or scene.name)
     # room for the 3-D view's z label, which tight_layout does not see (it ran into the
     # view from above's y label)

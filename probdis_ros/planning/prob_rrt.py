@@ -97,6 +97,9 @@ from probdis_ros.planning.tree import Tree
 #: margin (the real iiwa stops short of the URDF limits) would refuse it.  RRTSettings keeps
 #: 0, the paper's planner, so that the simulated sweeps reproduce it path for path.
 ROBOT_JOINT_MARGIN = 0.035
+#: The most samples a round may draw (K x |C_RAND|): it draws them all at once, about 80 B
+#: each (0.8 GB here); more would exhaust a robot PC's memory in the middle of a run.
+MAX_ROUND_SAMPLES = 10_000_000
 
 
 @dataclass
@@ -126,6 +129,10 @@ class RRTSettings:
         checks = [(self.iterations >= 1, 'iterations must be >= 1'),
                   (self.delta > 0, 'delta must be > 0'),
                   (self.n_random >= 1, 'n_random must be >= 1'),
+                  (self.iterations * self.n_random <= MAX_ROUND_SAMPLES,
+                   f'iterations x n_random must be at most {MAX_ROUND_SAMPLES:,} (a round '
+                   f'draws {self.iterations:,} x {self.n_random:,} samples at once, about 80 '
+                   'B each)'),
                   (0.0 <= self.p_goal <= 1.0, 'p_goal must be in [0, 1]'),
                   (self.step > 0, 'step must be > 0'),
                   (self.rewire_factor >= 0, 'rewire_factor must be >= 0'),

@@ -602,6 +602,12 @@ class PlannerNode(Node):
                 Method.for_node(str(current.pop('method')), **current)
             except ValueError as err:
                 return SetParametersResult(successful=False, reason=f'method: {err}')
+        sizes = {p.name: p.value for p in params if p.name in ('iterations', 'n_random', 'method')}
+        if sizes and hasattr(self, 'arm'):     # (informed runs 8 K: with the method)
+            try:
+                self._make_planner(changes=sizes)
+            except ValueError as err:
+                return SetParametersResult(successful=False, reason=f'planner: {err}')
         for param in params:
             if param.name == 'goal':
                 problem = self._goal_problem(param.value)
@@ -1013,24 +1019,27 @@ class PlannerNode(Node):
                 print(f'[{NODE_NAME}] {message}', file=sys.stderr)
         self.recorder_close_at = None
 
-    def _make_planner(self, longest_plan: float | None = None):
-        """Return the planner the parameters ask for (its budget capped at longest_plan [s])."""
-        plan_time = self.get_parameter('plan_time').value
+    def _make_planner(self, longest_plan: float | None = None, changes: dict | None = None):
+        """
+        Return the planner the parameters ask for (its budget capped at longest_plan [s]).
+
+        changes: parameters about to be set, in place of theirs (a check before they are);
+        ValueError if the planner cannot be built from them.
+        """
+        def value(name: str):
+            return (changes or {}).get(name, self.get_parameter(name).value)
+
+        plan_time = value('plan_time')
         if longest_plan is not None:
             plan_time = min(plan_time, longest_plan)
         settings = RRTSettings(
-            iterations=self.get_parameter('iterations').value,
-            delta=self.get_parameter('delta').value,
-            n_random=self.get_parameter('n_random').value,
-            p_goal=self.get_parameter('p_goal').value, step=self.get_parameter('step').value,
-            plan_time=plan_time,
-            joint_margin=self.get_parameter('joint_margin').value,
+            iterations=value('iterations'), delta=value('delta'), n_random=value('n_random'),
+            p_goal=value('p_goal'), step=value('step'), plan_time=plan_time,
+            joint_margin=value('joint_margin'),
             **dict(zip(('joint_lower', 'joint_upper'),
-                       (tuple(bound.tolist()) for bound in self._joint_range()))))
-        method = Method.for_node(self.get_parameter('method').value,
-                                 self.get_parameter('threshold').value,
-                                 self.get_parameter('epsilon').value)
-        return method.planner(self.arm, settings, self.get_parameter('length_weight').value)
+                       (tuple(bound.tolist()) for bound in self._joint_range(changes)))))
+        method = Method.for_node(value('method'), value('threshold'), value('epsilon'))
+        return method.planner(self.arm, settings, value('length_weight'))
 
     def _same_driver(self) -> bool:
         """Tell whether the joint states are still the stream the last run began on."""
