@@ -121,7 +121,7 @@ def plot_episode(result, out: str | Path) -> Path:
         alpha = 0.25 + 0.75 * (k + 1) / len(result.traces)
         ax.plot(xy[:, 0], xy[:, 1], color='tab:blue', alpha=alpha, lw=1.5,
                 label='executed paths' if k == len(result.traces) - 1 else None)
-    if result.loop.attempts:     # (over the last trace, which it is where it got through)
+    if result.loop.attempts:     # drawn over the last trace, which it follows where it got out
         planned = arm.fk(_dense(result.loop.attempts[-1].path)).positions
         ax.plot(planned[:, 0], planned[:, 1], '--', color='tab:orange', lw=1,
                 label='last plan', zorder=3)
