@@ -83,6 +83,7 @@ from probdis_ros.motion.jtc import (
 from probdis_ros.motion.profiles import (
     DEFAULT_ACCELERATION,
     DEFAULT_JERK,
+    DEFAULT_VELOCITY_SCALING,
     from_state,
     Motion,
     MotionLimits,
@@ -154,7 +155,7 @@ RELEASE_SCALING = MAX_VELOCITY_SCALING
 class RunSettings:
     """How a run drives the arm; every default in one place (the node declares these)."""
 
-    velocity_scaling: float = 0.2
+    velocity_scaling: float = DEFAULT_VELOCITY_SCALING
     acceleration_scaling: float = 1.0
     acceleration_limit: float = DEFAULT_ACCELERATION   # rad/s^2, every joint (lbr MoveIt)
     jerk_limit: float = DEFAULT_JERK                   # rad/s^3, every joint
@@ -365,6 +366,9 @@ class Run:
         self.measured_velocity: np.ndarray | None = None
         self.measured_at = -np.inf
         self.detector: BlockDetector | None = None
+        # a verdict to answer at the newest state: (verdict, its detector, the state judged:
+        # its time and configuration)
+        self._judged: tuple[Verdict, BlockDetector, float, np.ndarray] | None = None
         self.trajectory: JtcTrajectory | None = None     # the last command, as JTC runs it
         # when it was sent (JTC took it then): the detector moves the trajectory's taken_at on
         # for an arm that begins late, which is no delay of JTC's own command
@@ -428,12 +432,16 @@ class Run:
 
     def on_joint_state(self, now: float, config: np.ndarray,
                        velocity: np.ndarray | None = None,
-                       effort: np.ndarray | None = None) -> None:
+                       effort: np.ndarray | None = None, newest: bool = True) -> None:
         """
         Take a measured state at time now (a configuration that cannot be the arm's stops).
 
         ``effort``, the measured joint torques where the driver sends them, feeds the
-        detector's external-torque ceiling and the run's peak external torque.
+        detector's external-torque ceiling and the run's peak external torque.  ``newest``
+        False: newer states already wait (a host that could not run for a while takes them
+        in a burst): a block is judged on this state, where it was seen, but answered from
+        the newest, where the arm is by now (a retreat from an older state would first pull
+        its command back by what the arm moved since, a step in velocity).
         """
         self._now = now
         problem = usable(self.arm, config)
@@ -468,6 +476,10 @@ class Run:
                 self.measured_velocity = self._positions_slope()
         if not self.phase.active:
             return
+        if self._judged is not None:
+            if newest:
+                self._answer(*self._judged, velocity)
+            return
         if self.detector is None:
             self._check_rest()
             return
@@ -476,6 +488,16 @@ class Run:
         if verdict is Verdict.MOVING:
             return
         detector, self.detector = self.detector, None
+        judged = (verdict, detector, now, self.measured.copy())
+        if newest:
+            self._answer(*judged, velocity)
+        else:
+            self._judged = judged
+
+    def _answer(self, verdict: Verdict, detector: BlockDetector, now: float,
+                seen: np.ndarray, velocity: np.ndarray | None) -> None:
+        """Answer a verdict on the state (now, seen) from the newest (velocity: its own)."""
+        self._judged = None
         self.rest_at = self.measured.copy()
         # blocked twice running without the arm moving at all: a retreat that never moves is
         # blocked (the arm pressed from behind too), and the path after it begins pressed, so
@@ -511,10 +533,10 @@ class Run:
             if verdict is Verdict.DONE:
                 self._completed(self.measured)
             else:
-                self._blocked(detector, now)
+                self._blocked(detector, now, seen)
         elif self.phase is Phase.RETREATING:
             if verdict is Verdict.BLOCKED:
-                self._retreat_blocked(detector, now)
+                self._retreat_blocked(detector, now, seen)
                 # JTC would run the retreat on to its end, its command ever farther from the
                 # held arm, the push growing while the next plan is made: stop it here
                 self._stop_arm()
@@ -561,6 +583,8 @@ class Run:
     def tick(self, now: float) -> None:
         """Check the joint states are fresh (at least every state_timeout)."""
         self._now = now
+        if self._judged is not None and self.phase.active:    # the newer states never came
+            self._answer(*self._judged, None)
         age = now - self.measured_at
         if self.phase.active and age > self.settings.state_timeout:
             self.finish(State.STOPPED, f'joint states stopped arriving: none for {age:.2f} s '
@@ -847,22 +871,27 @@ class Run:
         else:
             self._plan_from(self._plan_origin(self._time()) if self._desired_start else config)
 
-    def _onset(self, detector: BlockDetector, now: float
+    def _onset(self, detector: BlockDetector, now: float, seen: np.ndarray
                ) -> tuple[np.ndarray, int, np.ndarray]:
         """
         Return where the block began, the motion's edge it began on, and the joint direction.
 
-        The direction is the command's velocity then; where that is zero (a block at rest),
-        the edge's, or the first edge of the motion that has a length.
+        The edge is the one the arm was on (``Motion.edge_reached``), which may lie before
+        the command's: an arm that lags it had not reached the next via point, and a retreat
+        through that point would run on into what blocked it.  The direction is the
+        command's velocity then, if on that edge; else (a block at rest, a lagging arm) the
+        edge's, or the first edge of the motion that has a length.  Without a traced onset,
+        the block began at ``seen``, the state (of time now) it was judged on.
         """
         onset = detector.onset
         config, when = (onset.config, onset.time) if onset is not None else \
-            (self.measured, now)
-        elapsed = when - self.trajectory.taken_at - self.settings.detection.motion_delay
-        segment = self.motion.segment_at(max(elapsed, 0.0))
-        direction = onset.velocity if onset is not None else np.zeros_like(config)
-        via = self.motion.positions[np.searchsorted(self.motion.times, self.motion.via_times)]
-        edges = np.diff(via, axis=0)
+            (seen, now)
+        elapsed = max(when - self.trajectory.taken_at - self.settings.detection.motion_delay,
+                      0.0)
+        segment = self.motion.edge_reached(config, elapsed)
+        direction = onset.velocity if onset is not None and \
+            segment == self.motion.segment_at(elapsed) else np.zeros_like(config)
+        edges = np.diff(self.motion.via_positions, axis=0)
         order = [segment, *range(segment + 1, len(edges)), *range(segment - 1, -1, -1)]
         for k in order if not np.any(direction) else ():
             if np.any(edges[k]):
@@ -870,8 +899,8 @@ class Run:
                 break
         return config.copy(), segment, np.asarray(direction, dtype=float)
 
-    def _blocked(self, detector: BlockDetector, now: float) -> None:
-        config, segment, _ = self._onset(detector, now)
+    def _blocked(self, detector: BlockDetector, now: float, seen: np.ndarray) -> None:
+        config, segment, _ = self._onset(detector, now, seen)
         path = self.loop.attempts[-1].path
         segment = int(np.clip(segment, 0, len(path) - 2))
         # an edge of no length has no direction: the block is on the next one that moves
@@ -905,9 +934,9 @@ class Run:
         self._emit(PlanFrom(back[-1].copy()))
         self._emit(StatusChanged())
 
-    def _retreat_blocked(self, detector: BlockDetector, now: float) -> None:
+    def _retreat_blocked(self, detector: BlockDetector, now: float, seen: np.ndarray) -> None:
         """Learn a blocked retreat like any block; the next plan starts where the arm is."""
-        config, _, direction = self._onset(detector, now)
+        config, _, direction = self._onset(detector, now, seen)
         if not np.any(direction):
             self.message = f'retreat blocked ({detector.reason}) at rest: nothing to learn'
             return
@@ -930,9 +959,11 @@ class Run:
         self.plan_pending = False
         self.pending_path = None
         self._withdraw()
-        if self.detector is not None:   # held now only if its command began pressed in, not back
+        if self._judged is not None:    # blocked, not yet answered: held pressed in
+            self.pressed = self._judged[0] is Verdict.BLOCKED
+        elif self.detector is not None:  # held now only if its command began pressed in
             self.pressed = self.detector.pressed
-        self.detector = None
+        self.detector, self._judged = None, None
         self.message = message
         self.phase = Phase(state.value)
         if state is not State.SUCCEEDED:

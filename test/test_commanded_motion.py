@@ -45,7 +45,7 @@ from probdis_ros.motion.jtc import (
 )
 from probdis_ros.motion.profiles import from_state
 from probdis_ros.motion.state_check import BadJointStateError, StateCheck
-from probdis_ros.planning.disentangle import Disentangler
+from probdis_ros.planning.disentangle import Disentangler, failure_from_block
 from probdis_ros.run import (
     Learned,
     MAX_VELOCITY_SCALING,
@@ -405,6 +405,81 @@ def test_an_arm_settling_after_a_blocked_retreat_is_no_foreign_motion():
     for k in range(1, 41):                           # but 0.8 rad more is someone else's
         run.on_joint_state(t + 0.2 + 0.01 * k, held + step + 4 * step * k / 40)
     assert run.outcome == 'stopped' and 'while at rest between commands' in run.message
+
+
+class TurningPlanner:
+    """Plans Q0 -> V -> Q1, turning at V."""
+
+    via = Q0 + np.array([0.4, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+
+    def plan(self, start, goal, fmap, rng):
+        return Path(np.array([start, self.via, goal]))
+
+
+@pytest.mark.parametrize('start', ['measured', 'desired'])
+def test_a_block_seen_late_is_placed_where_the_arm_was_and_retreats_back(start):
+    # the arm stops dead halfway along the first edge; its states stop coming (an executor
+    # stalled, as in CI, or an arm that lags its command) until the command is well along
+    # the second: the block is the first edge's, and the retreat must not run on to the via
+    # point never reached (timed alone, the block was placed on the second edge, V joined
+    # the way back, and the retreat ran on into what had blocked the arm)
+    loop = Disentangler(ARM, TurningPlanner(), Q1, max_paths=5, seed=0, goal_tolerance=0.04)
+    run = Run(ARM, loop, RunSettings(jtc_start=start), clock=lambda: run._now)
+    run.start(0.0, Q0)
+    run.on_plan(loop.next_path(Q0))
+    motion, delay = run.motion, run.settings.detection.motion_delay
+    at_via = float(motion.via_times[1])
+    arm = follows(run.trajectory, run.settings.detection, blocked_at=0.5 * at_via + delay)
+    t, resumed = 0.0, at_via + delay + 0.4
+    while run.phase.value == 'executing' and t < 10.0:
+        t += 0.01
+        if not 0.5 * at_via + delay + 0.05 < t < resumed:       # nothing read meanwhile
+            run.on_joint_state(t, arm(t))
+    assert t >= resumed and motion.segment_at(t - delay) == 1
+    learned = [a.event for a in run.actions if isinstance(a, Learned)]
+    assert len(learned) == 1 and learned[0]['segment'] == 0
+    x, v, _ = failure_from_block(ARM, arm(t), TurningPlanner.via - Q0)
+    assert np.allclose(learned[0]['x'], x, atol=0.01)
+    assert np.dot(learned[0]['v'], v / np.linalg.norm(v)) > 0.99      # along the first edge
+    retreat = [a.command for a in run.actions if isinstance(a, Send)][-1]
+    assert np.abs(retreat.positions[-1] - Q0).max() < 1e-6      # back where it came from
+    assert np.abs(retreat.positions - TurningPlanner.via).sum(axis=1).min() > 0.15
+
+
+def test_a_block_seen_in_a_burst_of_states_is_answered_from_the_newest():
+    # A2 and A4 meet something, the other joints move on; the host could not run for 0.6 s
+    # and takes the waiting states at once: the block is judged (and learned) on the state
+    # it was seen in, and the retreat starts where the arm is by the newest (from the state
+    # judged, its command first jumped back by what the free joints moved since: 0.26 rad
+    # after a 0.4 s stall, run at the URDF's speed by ros2_control's limiter)
+    loop = Disentangler(ARM, Planner(), Q1 + np.r_[0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.5],
+                        max_paths=5, seed=0, goal_tolerance=0.04)
+    run = Run(ARM, loop, RunSettings(), clock=lambda: clock[0])
+    clock = [0.0]
+    run.start(0.0, Q0)
+    run.on_plan(loop.next_path(Q0))
+    jtc, delay = run.trajectory, run.settings.detection.motion_delay
+
+    def arm(t):
+        q = jtc.sample(t - delay)[0]
+        q[[1, 3]] = jtc.sample(min(t, 0.8) - delay)[0][[1, 3]]
+        return q
+    t = 0.0
+    while t < 1.0:
+        t = clock[0] = round(t + 0.01, 10)
+        run.on_joint_state(t, arm(t))
+    assert run.phase.value == 'executing'
+    clock[0] = 1.8                                    # the host could not run until now
+    burst = np.round(np.arange(1.71, 1.805, 0.01), 10)
+    for k, t in enumerate(burst):
+        run.on_joint_state(t, arm(t), newest=k == len(burst) - 1)
+    learned = [a.event for a in run.actions if isinstance(a, Learned)]
+    assert len(learned) == 1 and learned[0]['t'] < burst[-1]        # seen before the newest
+    retreat = [a.command for a in run.actions if isinstance(a, Send)][-1]
+    assert run.phase.value == 'retreating'
+    moved = np.abs(arm(burst[-1]) - arm(learned[0]['t'])).sum()
+    assert moved > 0.02                              # the free joints moved on meanwhile
+    assert np.abs(retreat.positions[0] - arm(burst[-1])).max() < 1e-9
 
 
 @pytest.mark.parametrize('start', ['measured', 'desired'])

@@ -176,6 +176,19 @@ def test_the_profile_sample_is_the_commanded_points():
     assert motion.segment_at(motion.via_times[1] + H) == 1
 
 
+def test_the_edge_reached_is_the_one_the_arm_is_on_never_ahead_of_its_command():
+    a, b, c = np.zeros(N), np.r_[0.4, [0.0] * (N - 1)], np.r_[0.4, 0.4, [0.0] * (N - 2)]
+    motion = time_parameterize(np.array([a, b, b, c]))        # a repeated via point too
+    late = motion.via_times[-1] - 0.1                          # the command on the last edge
+    assert motion.segment_at(late) == 2
+    assert motion.edge_reached(0.5 * (a + b), late) == 0       # the arm lags, short of b
+    assert motion.edge_reached(b + np.r_[0.0, 0.01, [0.0] * (N - 2)], late) == 2   # past b
+    assert motion.edge_reached(b, late) == 2                   # at b: the later edge
+    assert motion.edge_reached(0.5 * (b + c), 0.1) == 0        # never ahead of the command
+    assert motion.edge_reached(c + 1.0, late) == 2             # off the path: the nearest
+    assert motion.edge_reached(a - 1.0, late) == 0
+
+
 # ---------------------------------------------------------------- stops
 
 

@@ -22,6 +22,7 @@ from pathlib import Path
 import signal
 import subprocess
 import sys
+import threading
 import time
 
 import numpy as np
@@ -378,6 +379,31 @@ def test_joint_states_out_of_order_with_extra_joints_are_matched_by_name(ros, tm
     ros.probe.create_timer(0.01, lambda: ros.publish_state(None, names, positions))
     wait_for(lambda: node.measured is not None, 5, 'a joint state')
     np.testing.assert_allclose(node.measured, START)
+
+
+def test_joint_states_waiting_behind_one_are_taken_with_it_oldest_first(ros, tmp_path):
+    # an executor kept from running resumes with a queue of states: they are taken in one go
+    # (the run answers a block seen in one from the newest, where the arm is by then)
+    node = planner(ros, tmp_path)
+    taken, held, go = [], threading.Event(), threading.Event()
+    take = node._take_joint_state
+    node._take_joint_state = lambda data, info, newest: (taken.append(newest),
+                                                         take(data, info, newest))
+
+    def hold_the_executor():
+        held.set()
+        go.wait(5.0)
+    timer = ros.probe.create_timer(0.01, hold_the_executor)
+    wait_for(held.is_set, 5, 'the executor held')
+    timer.cancel()
+    states = [START + 0.001 * k for k in range(5)]
+    for q in states:
+        ros.publish_state(q)
+    time.sleep(0.3)                       # delivered meanwhile, behind the held executor
+    go.set()
+    wait_for(lambda: len(taken) == len(states), 5, 'the states taken')
+    assert taken == [False] * (len(states) - 1) + [True]
+    np.testing.assert_allclose(node.measured, states[-1])
 
 
 def test_joint_states_that_stop_arriving_stop_the_run(ros, tmp_path):

@@ -215,10 +215,38 @@ class Motion:
                            (self.positions[k + 1], self.velocities[k + 1],
                             self.accelerations[k + 1]))
 
+    @property
+    def via_positions(self) -> np.ndarray:
+        """Return the path's via points, where the motion is at via_times."""
+        return self.positions[np.searchsorted(self.times, self.via_times)]
+
     def segment_at(self, t: float) -> int:
         """Return the path edge being run at t (k: from via point k to k + 1)."""
         k = int(np.searchsorted(self.via_times, t, side='right')) - 1
         return int(np.clip(k, 0, max(len(self.via_times) - 2, 0)))
+
+    def edge_reached(self, config: np.ndarray, t: float) -> int:
+        """
+        Return the path edge an arm at config is on, its command at t (k: via k to k + 1).
+
+        The time alone says which edge the command runs, and an arm lags its command: in
+        joint impedance by 0.1-0.3 s, and by as long as a block is detected late (a stalled
+        executor), enough to be an edge behind on short edges or near a via point.  So of
+        the edges up to t's, the one whose line lies nearest config in joint space; of
+        edges as near (a via point between them), the later.
+        """
+        latest = self.segment_at(t)
+        via = self.via_positions
+        if len(via) < 2:
+            return latest
+        config = np.asarray(config, dtype=float)
+        starts, edges = via[:latest + 1], np.diff(via[:latest + 2], axis=0)
+        lengths = np.einsum('ij,ij->i', edges, edges)
+        along = np.einsum('ij,ij->i', config - starts, edges)
+        share = np.clip(np.divide(along, lengths, out=np.zeros_like(along),
+                                  where=lengths > 0), 0.0, 1.0)
+        distance = np.linalg.norm(starts + share[:, None] * edges - config, axis=1)
+        return int(np.flatnonzero(distance <= distance.min() + 1e-9)[-1])
 
 
 def _check_period(period: float) -> None:

@@ -410,8 +410,9 @@ class PlannerNode(Node):
         # newest states first at 1 kHz instead of a growing backlog)
         states_qos = QoSProfile(depth=10, reliability=qos_profile_sensor_data.reliability,
                                 durability=qos_profile_sensor_data.durability)
-        self.create_subscription(JointState, self.get_parameter('joint_states_topic').value,
-                                 self._on_joint_state, states_qos, raw=True)
+        self.states_sub = self.create_subscription(
+            JointState, self.get_parameter('joint_states_topic').value, self._on_joint_state,
+            states_qos, raw=True)
         self.failure_pub = self.create_publisher(String, '~/failures', 10)
         self.recorder: BagRecorder | None = None
         self._sent: deque[float] = deque()     # when each own command was sent, to record it
@@ -1298,6 +1299,29 @@ class PlannerNode(Node):
                                          f'{self.traj_pub.topic_name}; stopped')
 
     def _on_joint_state(self, data: bytes, info: dict) -> None:
+        """
+        Take a joint state and those already waiting behind it, oldest first.
+
+        An executor kept from running resumes with a queue of states: each is judged at its
+        own time, and a block seen in one is answered from the newest (``Run.on_joint_state``),
+        where the arm is by now.
+        """
+        batch = [(data, info), *self._waiting_states()]
+        for k, (data, info) in enumerate(batch):
+            self._take_joint_state(data, info, newest=k == len(batch) - 1)
+
+    def _waiting_states(self) -> list[tuple[bytes, dict]]:
+        """Take the joint states DDS holds that the executor has not handed over yet."""
+        waiting = []
+        try:
+            with self.states_sub.handle:
+                while (taken := self.states_sub.handle.take_message(JointState, True)):
+                    waiting.append(taken)
+        except InvalidHandle:       # the node is being destroyed
+            pass
+        return waiting
+
+    def _take_joint_state(self, data: bytes, info: dict, newest: bool) -> None:
         try:
             msg = deserialize_message(data, JointState)
         except Exception as err:   # undecodable bytes must not stop the node
@@ -1326,7 +1350,7 @@ class PlannerNode(Node):
         self.motion_watch.add(now, q)
         if self.run is not None:
             effort = values_by_name(msg.name, msg.effort, self.joint_names)
-            self._guarded(self.run.on_joint_state, now, q, v, effort)
+            self._guarded(self.run.on_joint_state, now, q, v, effort, newest)
 
     def _refused(self, reason: str) -> None:
         """Log a refused joint state; a run stops, decelerating from the last accepted one."""
