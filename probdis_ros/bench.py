@@ -310,11 +310,12 @@ def bench_quality(budgets: tuple[float, ...] = QUALITY_BUDGETS, seeds: int = 5,
     """
     Median path cost and success probability per map, planner and wall-time budget.
 
-    ProbRRT runs anytime (``plan_time`` = the budget, K = 100 per round); BIT* solves for the
-    budget.  Both are timed from the call to the returned path (set-up included), and both
-    paths are scored by :func:`path_quality`.  The paper's configuration (K = 100, no
-    budget) is reported beside, with its own time.  Seeds: ProbRRT's generator; OMPL's
-    global generator is seeded once (its runs differ by timing anyway).
+    ProbRRT runs anytime (``plan_time`` = the budget: its trees grow in slices of 1, 2, 4, ...
+    iterations, ``ProbRRT.grow``); BIT* solves for the budget.  Both are timed from the call
+    to the returned path (set-up included), and both paths are scored by
+    :func:`path_quality`.  The paper's configuration (K = 100, no budget) is reported
+    beside, with its own time.  Seeds: ProbRRT's generator; OMPL's global generator is
+    seeded once (its runs differ by timing anyway).
     """
     from probdis_ros.model.path_cost import DEFAULT_DELTA, DEFAULT_LENGTH_WEIGHT
     from probdis_ros.planning import ProbRRT, RRTSettings

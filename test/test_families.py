@@ -20,6 +20,7 @@ import subprocess
 from conftest import probdis_command
 import numpy as np
 from probdis_ros.experiments.sweep import EPISODES_FILE, read_episodes
+from probdis_ros.sim.compliant_arm import densify
 from probdis_ros.sim.families import (
     certify,
     FAMILIES,
@@ -107,6 +108,14 @@ def _unit(v):
     return v / np.linalg.norm(v)
 
 
+def _turned(world, q):
+    """Return orientation q turned about x by a little more than the world's tolerance."""
+    angle = np.pi * world.orientation_tolerance * 1.05
+    w1, v1 = np.cos(angle / 2), np.array([np.sin(angle / 2), 0.0, 0.0])
+    w0, v0 = q[0], q[1:]
+    return np.r_[w0 * w1 - v0 @ v1, w0 * v1 + w1 * v0 + np.cross(v0, v1)]
+
+
 def test_an_open_box_lets_the_flange_out_only_through_its_open_side(worlds):
     for seed in SEEDS:
         world = worlds[('open_box', seed)]
@@ -125,12 +134,7 @@ def test_a_closed_box_holds_the_object_as_held_and_lets_it_out_turned(worlds):
         dirs = directions(5000)
         assert not escapes(world, dirs, quat=q_start).any()
         # turned by a little more than the tolerance (about the x axis): every way is open
-        angle = np.pi * world.orientation_tolerance * 1.05
-        turn = np.array([np.cos(angle / 2), np.sin(angle / 2), 0.0, 0.0])
-        w0, v0 = q_start[0], q_start[1:]
-        w1, v1 = turn[0], turn[1:]
-        turned = np.r_[w0 * w1 - v0 @ v1, w0 * v1 + w1 * v0 + np.cross(v0, v1)]
-        assert escapes(world, dirs, quat=turned).all()
+        assert escapes(world, dirs, quat=_turned(world, q_start)).all()
         assert 0.25 <= world.orientation_tolerance <= 0.45
 
 
@@ -177,16 +181,27 @@ def test_a_hook_under_a_bar_blocks_up_and_the_stem_side_but_not_the_free_side(wo
                                                       np.array([aside, aside + 0.3 * up]))).any()
 
 
-def test_clutter_puts_an_item_on_the_straight_move_and_keeps_start_and_goal_free(worlds):
+def test_clutter_puts_an_item_on_the_straight_move_and_soft_ones_give_way_turned(worlds):
+    soft = expected = 0.0
     for seed in SEEDS:
         world = worlds[('clutter', seed)]
         p = world.params
         assert 20 <= len(world.obstacles) == p['items'] <= 45
-        soft = sum(o.orientation is not None for o in world.obstacles)
-        assert soft <= len(world.obstacles)
-        x0 = world.arm.fk(world.start).positions[0]
+        x0, q_start = _pose(world)
         assert all(np.linalg.norm(o.center - x0) <= p['cluster_radius'] + 0.1
                    for o in world.obstacles)
+        # the straight move to the goal, the object as held, meets an item
+        trace = world.arm.fk(densify(np.array([world.start, world.goal]), 0.01)[0]).positions
+        assert any(np.isfinite(o.first_hit(trace[:-1], trace[1:])).any()
+                   for o in world.obstacles)
+        gated = [o for o in world.obstacles if o.orientation is not None]
+        for obstacle in gated:        # soft: blocks the object as held, not turned past
+            assert obstacle.blocks_orientation(q_start[None], world.orientation_tolerance)[0]
+            assert not obstacle.blocks_orientation(_turned(world, q_start)[None],
+                                                   world.orientation_tolerance)[0]
+        soft += len(gated)
+        expected += p['soft_share'] * len(world.obstacles)
+    assert soft > 0 and abs(soft - expected) <= 4 * np.sqrt(expected) + 1
 
 
 def test_following_a_line_keeps_the_flange_on_it():

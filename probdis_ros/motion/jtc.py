@@ -28,7 +28,10 @@ interface, as the lbr stack runs it:
 * Each segment is interpolated from what both of its ends carry: linear where either end
   lacks velocities (a velocity step at every via point), cubic with positions and velocities
   at both ends, quintic with accelerations too.  The measured state carries no accelerations
-  (the lbr stack exports position and velocity), so the first segment is at most cubic.
+  (the lbr stack exports position and velocity), so the first segment is cubic (quintic from
+  zero acceleration where JTC fills zeros into the point before, ros2_controllers #2043: the
+  same on this package's profiles but for rounding).  The run's messages begin with their
+  start at time 0, so JTC never runs that segment for them.
 * After the last point the controller holds that point.
 * Every update at time t commands the sample at ``t + period`` (one period ahead).
 
@@ -314,7 +317,8 @@ class TrajectoryController:
     position, or the last point).
     """
 
-    def __init__(self, period: float = 1.0 / CONTROLLER_RATE, start: str = 'measured') -> None:
+    def __init__(self, period: float = 1.0 / CONTROLLER_RATE,
+                 start: str = DEFAULT_JTC_START) -> None:
         if start not in JTC_STARTS:
             raise ValueError(f'start must be one of {", ".join(JTC_STARTS)}, got {start!r}')
         self.period = period
