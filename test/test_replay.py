@@ -26,7 +26,9 @@ import numpy as np
 from probdis_ros.model import iiwa_arm
 from probdis_ros.model.failure_map import lock_map
 from probdis_ros.motion.cartesian_speed import point_speeds
+from probdis_ros.motion.detector import DetectorSettings
 from probdis_ros.motion.timing import time_path
+from probdis_ros.planning.disentangle import failure_from_block
 from probdis_ros.resources import scenario_path
 from probdis_ros.ros.mock_iiwa_node import MockIiwa
 from probdis_ros.ros.planner_node import PlannerNode
@@ -347,6 +349,60 @@ def test_a_run_stopped_as_not_executed_is_not_replayed_as_disentangled(tmp_path)
     result = replay(tmp_path / 'bag')
     assert any('nothing executed the command' in p for p in result.problems)
     assert result.paths == 1 and not result.success and result.blocks == []
+
+
+def test_a_block_seen_after_a_gap_in_the_states_is_learned_along_the_edge_the_arm_was_on(
+        tmp_path):
+    # the arm stops dead on the first edge; no states reach the recording until the command
+    # runs the second (a planner that could not run): the failure moves the way the first
+    # edge does, as the live run now learns it (Motion.edge_reached), not the second's way
+    arm = iiwa_arm()
+    q0 = WORLD.start
+    via, goal = q0 + np.r_[0.3, [0.0] * 6], q0 + np.r_[0.3, 0.3, [0.0] * 5]
+    timed = time_path(np.array([q0, via, goal]), arm.velocity_limits, 0.5)
+    delay = DetectorSettings().motion_delay
+    at_via = float(timed.times[1])
+    stop = 0.5 * at_via
+
+    def state(t):
+        return timed.at(min(max(t - delay, 0.0), stop))
+    messages = [(int(1e9), JS, js_message(JOINTS, q0, 1.0)),
+                (int(1.05e9), TRAJ, traj_message(timed, JOINTS))]
+    for t in np.arange(0.06, at_via + delay + 0.8, 1.0 / RATE):
+        if not stop + delay + 0.02 < t - 0.05 < at_via + delay + 0.3:     # the gap
+            q = state(t - 0.05)
+            messages.append((int((1.05 + t) * 1e9), JS, js_message(JOINTS, q, 1.05 + t)))
+    write_bag(tmp_path / 'bag', messages, *FORMATS[0])
+    result = replay(tmp_path / 'bag')
+    assert len(result.blocks) == 1
+    block = result.blocks[0]
+    assert block.t > at_via + 1.05 - 1.0 + delay                 # seen on the second edge
+    _, v, _ = failure_from_block(arm, block.config, via - q0)
+    assert np.dot(result.fmap.directions[0], v / np.linalg.norm(v)) > 0.99
+
+
+def test_a_stop_sent_as_a_run_ends_is_no_path_of_it(tmp_path):
+    # a run that gave up: its last path blocked, the planner retreated and then stopped the
+    # arm, moving, before its status said so; the stop, taken for a new path that ran to its
+    # end, replayed the run as disentangled
+    messages, held, t_stop = simulated_run()
+    t_block = 1.0 + t_stop + 0.35
+    arm = iiwa_arm()
+    retreat = time_path(np.array([held, WORLD.start]), arm.velocity_limits, 0.5)
+    brake = time_path(np.array([held, held + 0.05]), arm.velocity_limits, 0.5)
+    status = '/probdis_planner/status'
+    messages = [m for m in messages if m[0] <= t_block * 1e9]
+    messages += [(int(t_block * 1e9) + 1, TRAJ, traj_message(retreat, JOINTS)),
+                 (int(t_block * 1e9) + 2, TRAJ, traj_message(brake, JOINTS)),
+                 (int(t_block * 1e9) + 3, status,
+                  {'data': json.dumps({'state': 'gave_up', 'paths': 1})})]
+    for k in range(1, int(2.0 * RATE)):
+        t = t_block + k / RATE
+        messages.append((int(t * 1e9), JS, js_message(JOINTS, brake.at(k / RATE), t)))
+    types = {JS: JS_TYPE, TRAJ: TRAJ_TYPE, status: 'std_msgs/msg/String'}
+    write_bag(tmp_path / 'bag', sorted(messages, key=lambda m: m[0]), *FORMATS[0], types=types)
+    result = replay(tmp_path / 'bag')
+    assert len(result.blocks) == 1 and not result.success
 
 
 def test_replay_refuses_bad_bags_clearly(tmp_path):

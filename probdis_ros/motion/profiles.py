@@ -231,22 +231,32 @@ class Motion:
 
         The time alone says which edge the command runs, and an arm lags its command: in
         joint impedance by 0.1-0.3 s, and by as long as a block is detected late (a stalled
-        executor), enough to be an edge behind on short edges or near a via point.  So of
-        the edges up to t's, the one whose line lies nearest config in joint space; of
-        edges as near (a via point between them), the later.
+        executor), enough to be an edge behind on short edges or near a via point
+        (:func:`edge_reached`).
         """
-        latest = self.segment_at(t)
-        via = self.via_positions
-        if len(via) < 2:
-            return latest
-        config = np.asarray(config, dtype=float)
-        starts, edges = via[:latest + 1], np.diff(via[:latest + 2], axis=0)
-        lengths = np.einsum('ij,ij->i', edges, edges)
-        along = np.einsum('ij,ij->i', config - starts, edges)
-        share = np.clip(np.divide(along, lengths, out=np.zeros_like(along),
-                                  where=lengths > 0), 0.0, 1.0)
-        distance = np.linalg.norm(starts + share[:, None] * edges - config, axis=1)
-        return int(np.flatnonzero(distance <= distance.min() + 1e-9)[-1])
+        return edge_reached(self.via_positions, config, self.segment_at(t))
+
+
+def edge_reached(points: np.ndarray, config: np.ndarray, latest: int) -> int:
+    """
+    Return which edge of a polyline (k: points k to k + 1) a lagging arm at config is on.
+
+    Of the edges up to ``latest`` (its command's then: the arm never runs ahead of it), the
+    one whose line lies nearest config in joint space; of edges as near (a point between
+    them), the later.
+    """
+    points = np.asarray(points, dtype=float)
+    if len(points) < 2:
+        return latest
+    latest = int(np.clip(latest, 0, len(points) - 2))
+    config = np.asarray(config, dtype=float)
+    starts, edges = points[:latest + 1], np.diff(points[:latest + 2], axis=0)
+    lengths = np.einsum('ij,ij->i', edges, edges)
+    along = np.einsum('ij,ij->i', config - starts, edges)
+    share = np.clip(np.divide(along, lengths, out=np.zeros_like(along), where=lengths > 0),
+                    0.0, 1.0)
+    distance = np.linalg.norm(starts + share[:, None] * edges - config, axis=1)
+    return int(np.flatnonzero(distance <= distance.min() + 1e-9)[-1])
 
 
 def _check_period(period: float) -> None:

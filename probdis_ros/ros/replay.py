@@ -51,6 +51,7 @@ from probdis_ros.motion.jtc import (
     moved_onto_clock,
     taken_trajectory,
 )
+from probdis_ros.motion.profiles import edge_reached
 from probdis_ros.motion.state_check import StateCheck, values_by_name
 from probdis_ros.planning.disentangle import failure_from_block
 from probdis_ros.ros import JOINT_NAMES, JOINT_STATES_TOPIC, TRAJECTORY_TOPIC
@@ -323,6 +324,8 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
             if status_paths:           # the last word of a run (a withdrawn plan lowers it)
                 status_paths[-1] = int(state.get('paths', 0))
             ended = state.get('state') in FINISHED
+            if ended:      # the live run judged nothing after: not the stop it sent last
+                detector, kind = None, 'hold'
             continue
         if message.topic == trajectory_topic:
             try:
@@ -425,10 +428,13 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
             onset = detector.onset
             config = onset.config if onset is not None else q
             when = onset.time if onset is not None else t
-            direction = onset.velocity if onset is not None else np.zeros_like(q)
+            # on the edge of the command the arm was on (Motion.edge_reached): its samples'
+            points = detector.path.points
+            latest = detector.path.segment_at(when - detector.start_time)
+            segment = edge_reached(points, config, latest)
+            direction = onset.velocity if onset is not None and segment == latest else \
+                np.zeros_like(q)
             if not np.any(direction):
-                points = detector.path.points
-                segment = detector.path.segment_at(when - detector.start_time)
                 direction = points[segment + 1] - points[segment]
             detector = None
             if not np.any(direction):
