@@ -308,6 +308,15 @@ def run_from(q0=Q0, goal=Q1) -> Run:
     return run
 
 
+def running(planner=None, **settings) -> Run:
+    """Return a run from Q0 to Q1 (RunSettings(**settings)) that has sent its first path."""
+    loop = Disentangler(ARM, planner or Planner(), Q1, max_paths=5, seed=0, goal_tolerance=0.04)
+    run = Run(ARM, loop, RunSettings(**settings), clock=lambda: run._now)
+    run.start(0.0, Q0)
+    run.on_plan(loop.next_path(Q0))
+    return run
+
+
 def learned(run) -> list:
     return [a for a in run.actions if isinstance(a, Learned)]
 
@@ -423,10 +432,7 @@ def test_a_block_seen_late_is_placed_where_the_arm_was_and_retreats_back(start):
     # the second: the block is the first edge's, and the retreat must not run on to the via
     # point never reached (timed alone, the block was placed on the second edge, V joined
     # the way back, and the retreat ran on into what had blocked the arm)
-    loop = Disentangler(ARM, TurningPlanner(), Q1, max_paths=5, seed=0, goal_tolerance=0.04)
-    run = Run(ARM, loop, RunSettings(jtc_start=start), clock=lambda: run._now)
-    run.start(0.0, Q0)
-    run.on_plan(loop.next_path(Q0))
+    run = running(TurningPlanner(), jtc_start=start)
     motion, delay = run.motion, run.settings.detection.motion_delay
     at_via = float(motion.via_times[1])
     arm = follows(run.trajectory, run.settings.detection, blocked_at=0.5 * at_via + delay)
@@ -487,10 +493,7 @@ def test_a_blocked_retreat_is_stopped_at_once_not_run_on_while_the_next_plan_is_
     # JTC runs a command to its end: a retreat blocked and left running would wind its
     # command ever farther from the held arm (200 Nm/rad on the real arm) until the next
     # plan comes, which may take seconds
-    loop = Disentangler(ARM, Planner(), Q1, max_paths=5, seed=0, goal_tolerance=0.04)
-    run = Run(ARM, loop, RunSettings(jtc_start=start), clock=lambda: run._now)
-    run.start(0.0, Q0)
-    run.on_plan(loop.next_path(Q0))
+    run = running(jtc_start=start)
     arm = follows(run.trajectory, run.settings.detection, blocked_at=0.6)
     t = 0.0
     while run.phase.value != 'retreating' and t < 5.0:
