@@ -405,6 +405,34 @@ def test_a_stop_sent_as_a_run_ends_is_no_path_of_it(tmp_path):
     assert len(result.blocks) == 1 and not result.success
 
 
+def test_a_path_the_run_ended_on_as_done_is_done_though_the_status_came_a_state_earlier(
+        tmp_path):
+    # the live planner judged the path done at a state the replay judges a state later:
+    # "succeeded" says nothing of a stop to come, and the replay keeps judging the path
+    arm = iiwa_arm()
+    path = time_path(np.array([WORLD.start, WORLD.start + 0.1]), arm.velocity_limits, 0.5)
+    status = '/probdis_planner/status'
+    messages = [(int(1e9), JS, js_message(JOINTS, WORLD.start, 1.0)),
+                (int(1.01e9), TRAJ, traj_message(path, JOINTS))]
+    for k in range(1, int((path.duration + 1.0) * RATE)):
+        t = 1.01 + k / RATE
+        q = path.at(max(k / RATE - DetectorSettings().motion_delay, 0.0))
+        messages.append((int(t * 1e9), JS, js_message(JOINTS, q, t)))
+    types = {JS: JS_TYPE, TRAJ: TRAJ_TYPE, status: 'std_msgs/msg/String'}
+    done = replay_of(tmp_path / 'free', messages, types)
+    assert done.success
+    t_done = 1.01 + path.duration + DetectorSettings().motion_delay
+    messages.append((int(t_done * 1e9), status,
+                     {'data': json.dumps({'state': 'succeeded', 'paths': 1})}))
+    assert replay_of(tmp_path / 'ended', messages, types).success
+
+
+def replay_of(bag, messages, types):
+    """Write the messages (in time order) as a bag and replay it."""
+    write_bag(bag, sorted(messages, key=lambda m: m[0]), *FORMATS[0], types=types)
+    return replay(bag)
+
+
 def test_replay_refuses_bad_bags_clearly(tmp_path):
     with pytest.raises(ReplayError, match='no such bag'):
         replay(tmp_path / 'missing')

@@ -324,7 +324,10 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
             if status_paths:           # the last word of a run (a withdrawn plan lowers it)
                 status_paths[-1] = int(state.get('paths', 0))
             ended = state.get('state') in FINISHED
-            if ended:      # the live run judged nothing after: not the stop it sent last
+            if ended and state.get('state') != 'succeeded':
+                # given up or stopped, the live run judged nothing after: its last command
+                # was the stop (a path's end it had judged at a state before the status,
+                # which the replay may judge a state later: kept)
                 detector, kind = None, 'hold'
             continue
         if message.topic == trajectory_topic:
