@@ -28,6 +28,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 import math
 
+from linear_path import time_path
 import numpy as np
 from probdis_ros.model import iiwa_arm
 from probdis_ros.motion.jtc import interpolate, JtcTrajectory
@@ -38,10 +39,8 @@ from probdis_ros.motion.profiles import (
     PERIOD,
     profile_limits,
     stop,
-    stop_command,
     time_parameterize,
 )
-from probdis_ros.motion.timing import time_path
 import pytest
 import ruckig
 
@@ -194,7 +193,7 @@ def test_the_edge_reached_is_the_one_the_arm_is_on_never_ahead_of_its_command():
 
 def test_a_stop_at_rest_is_a_one_point_hold():
     q = np.array([0.1, 0.2, 0.3, -0.4, 0.5, 0.6, 0.7])
-    command = stop_command(q, np.zeros(N), np.zeros(N))
+    command = stop(q, np.zeros(N), np.zeros(N)).command
     assert command.times == pytest.approx([H]) and np.array_equal(command.positions, q[None])
     assert not command.velocities.any() and not command.accelerations.any()
 

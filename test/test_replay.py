@@ -22,12 +22,12 @@ import subprocess
 import sys
 
 from conftest import probdis_command
+from linear_path import time_path
 import numpy as np
 from probdis_ros.model import iiwa_arm
 from probdis_ros.model.failure_map import lock_map
 from probdis_ros.motion.cartesian_speed import point_speeds
 from probdis_ros.motion.detector import DetectorSettings
-from probdis_ros.motion.timing import time_path
 from probdis_ros.planning.disentangle import failure_from_block
 from probdis_ros.resources import scenario_path
 from probdis_ros.ros.mock_iiwa_node import MockIiwa

@@ -17,6 +17,7 @@
 
 from dataclasses import replace
 
+from linear_path import time_path
 import numpy as np
 from probdis_ros.model import iiwa_arm
 from probdis_ros.motion.jtc import (
@@ -26,7 +27,6 @@ from probdis_ros.motion.jtc import (
     JtcTrajectory,
     TrajectoryCommand,
 )
-from probdis_ros.motion.timing import time_path
 from probdis_ros.physics import load_scene, measure
 from probdis_ros.physics.simulated_robot import build_robot, RobotSettings
 from probdis_ros.run import MAX_VELOCITY_SCALING

@@ -368,12 +368,6 @@ def time_parameterize(path: np.ndarray, limits: MotionLimits | None = None,
                   period * np.asarray(via_steps, dtype=float), period=period)
 
 
-def stop_command(q: np.ndarray, v: np.ndarray, a: np.ndarray,
-                 limits: MotionLimits | None = None, period: float = PERIOD) -> TrajectoryCommand:
-    """Return the command that brings the commanded state (q, v, a) to rest: see ``stop``."""
-    return stop(q, v, a, limits, period).command
-
-
 def _line(v: np.ndarray, a: np.ndarray) -> np.ndarray | None:
     """Return a direction (largest component 1) along which v and a both lie, or None."""
     for lead in (v, a):

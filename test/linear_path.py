@@ -13,11 +13,12 @@
 # limitations under the License.
 
 """
-Joint trajectories as the controller sees them: timing, interpolation, progress.
+Linearly timed paths for the tests: the message shape other clients of JTC send.
 
-Pure numpy, no rclpy, so that the live planner node, the mock arm and ``probdis replay``
-share it.  A trajectory here is via points ``(M, n)`` with ``times`` (seconds from its start,
-strictly increasing, ``times[0] = 0`` at the first point, which is where the arm is).
+Positions only, linear between via points (JTC's "discouraged" linear segments); the
+planner itself sends ``profiles.Motion`` (jerk-limited, every sample with velocities and
+accelerations).  A trajectory here is via points ``(M, n)`` with ``times`` (seconds from
+its start, strictly increasing, ``times[0] = 0`` at the first point, where the arm is).
 """
 
 from __future__ import annotations
@@ -85,9 +86,3 @@ def time_path(points: np.ndarray, velocity_limits: np.ndarray, scaling: float) -
     durations = np.abs(np.diff(points, axis=0)) / speeds
     segment = np.maximum(durations.max(axis=1, initial=0.0), MIN_SEGMENT_S)
     return TimedPath(points, np.concatenate([[0.0], np.cumsum(segment)]))
-
-
-def hold_command(config: np.ndarray, after: float = 0.01) -> TrajectoryCommand:
-    """Return a command that holds config, reached after seconds, at rest."""
-    config = np.asarray(config, dtype=float)
-    return TrajectoryCommand(np.array([after]), config[None], np.zeros((1, len(config))))
