@@ -779,12 +779,8 @@ class PlannerNode(Node):
         that clock began, for the detector, up to that long before the arm took it (a fast
         path read as not executed).  DDS keeps receiving meanwhile; its newest is the time.
         """
-        try:
-            with self.clock_sub.handle:
-                while (taken := self.clock_sub.handle.take_message(ClockMsg, False)):
-                    self._on_clock(taken[0])
-        except InvalidHandle:       # the node is being destroyed
-            pass
+        for msg, _ in _waiting(self.clock_sub):
+            self._on_clock(msg)
 
     def _receive_time(self, info: dict) -> float:
         """
@@ -1306,20 +1302,9 @@ class PlannerNode(Node):
         own time, and a block seen in one is answered from the newest (``Run.on_joint_state``),
         where the arm is by now.
         """
-        batch = [(data, info), *self._waiting_states()]
+        batch = [(data, info), *_waiting(self.states_sub)]
         for k, (data, info) in enumerate(batch):
             self._take_joint_state(data, info, newest=k == len(batch) - 1)
-
-    def _waiting_states(self) -> list[tuple[bytes, dict]]:
-        """Take the joint states DDS holds that the executor has not handed over yet."""
-        waiting = []
-        try:
-            with self.states_sub.handle:
-                while (taken := self.states_sub.handle.take_message(JointState, True)):
-                    waiting.append(taken)
-        except InvalidHandle:       # the node is being destroyed
-            pass
-        return waiting
 
     def _take_joint_state(self, data: bytes, info: dict, newest: bool) -> None:
         try:
@@ -1439,6 +1424,19 @@ class PlannerNode(Node):
             os.close(self.map_lock)
             self.map_lock = None
         super().destroy_node()
+
+
+def _waiting(subscription) -> list[tuple]:
+    """Take the (message, info) pairs DDS holds that the executor has not handed over yet."""
+    waiting = []
+    try:
+        with subscription.handle:
+            while (taken := subscription.handle.take_message(subscription.msg_type,
+                                                             subscription.raw)):
+                waiting.append(taken)
+    except InvalidHandle:       # the node is being destroyed
+        pass
+    return waiting
 
 
 def _in_thread(function, *args) -> Future:
