@@ -614,13 +614,20 @@ class BlockDetector:
         self.started = True
         if getattr(getattr(self.path, 'command', None), 'stamp', 0.0) > 0:
             return False        # stamped: JTC runs it on its own time line, late or not
-        # when the command would have moved the arm as far as it has moved now
-        first = np.mean(self._first, axis=0)
-        steps = np.arange(0.0, max(t, 0.0) + 0.005, 0.005)
-        reached = np.array([float(np.abs(self._desired(tau)[0] - first).sum())
-                            for tau in steps]) >= moved
-        began = steps[int(np.argmax(reached))] if reached.any() else steps[-1]
-        late = t - began
+        # when the command was where the arm is (its mean over the last ENDS seconds, at
+        # their mean time), the latest such time: matched by position, not by the distance
+        # from the start, which a command that first brakes from the noise of a measured
+        # velocity at rest and comes back reaches twice (the early time read an arm on time
+        # as 0.2 s late, and the gap it then saw as it moved on was called a block)
+        recent = [(when, q) for when, q in self._history if when >= now - ENDS]
+        where = np.mean([q for _, q in recent], axis=0)
+        at = float(np.mean([when for when, _ in recent])) - self.start_time
+        steps = np.arange(0.0, max(at, 0.0) + 0.005, 0.005)
+        away = np.array([float(np.abs(self._desired(tau)[0] - where).sum()) for tau in steps])
+        nearest = len(steps) - 1 - int(np.argmin(away[::-1]))
+        if away[nearest] > 0.5 * moved:
+            return False        # moved off the command's course: nothing says when it began
+        late = at - steps[nearest]
         if late <= LATE_TAKE:
             return False
         self.late += late
