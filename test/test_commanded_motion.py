@@ -111,6 +111,33 @@ def test_free_motion_through_noise_is_never_a_stall(seed):
     assert verdict is Verdict.DONE
 
 
+@pytest.mark.parametrize('inertia', [3.0, 5.0])
+def test_an_arm_lagging_more_than_motion_delay_is_not_blocked_as_its_path_ends(inertia):
+    # joint impedance (200 Nm/rad, damping 0.7) on a link of this inertia [kg m^2]: a ramp
+    # lags its command by 2 x 0.7 x sqrt(I / K), 0.17 and 0.22 s, with motion_delay 0.1.
+    # The ceilings' speed allowance was the command's speed at one instant: as the path
+    # ended it fell, while the lagging arm's gap had not (inertia 5: "gap 0.548 above the
+    # ceiling 0.527" at 1.17 s of a 1.17 s path)
+    settings = DetectorSettings()
+    limits = RunSettings(velocity_scaling=0.7).limits(ARM)
+    far = Q0 + np.array([1.0, 0.5, 0.4, 0.8, 0.5, -0.6, 1.0])
+    motion = from_state(Q0, None, np.array([Q0, far]), limits)
+    jtc = JtcTrajectory(motion.command_from_start, Q0, None, 0.0)
+    detector = BlockDetector(jtc, 0.0, settings, expect_motion=True)
+    stiffness = 200.0
+    damping = 2 * 0.7 * np.sqrt(stiffness * inertia)
+    q, v, step = Q0.copy(), np.zeros(7), 0.001
+    rng = np.random.default_rng(0)
+    for k in range(round((jtc.duration + 2.0) / step)):
+        if k % 10 == 0:                             # joint states at 100 Hz
+            verdict = detector.update(k * step, q + rng.normal(0.0, 1e-4, 7))
+            if verdict is not Verdict.MOVING:
+                break
+        v += (stiffness * (jtc.sample(k * step)[0] - q) - damping * v) / inertia * step
+        q += v * step
+    assert verdict is Verdict.DONE, detector.reason
+
+
 def test_the_motion_measure_averages_the_noise_out():
     rng = np.random.default_rng(1)
     times = np.arange(0.0, 0.3, 0.001)

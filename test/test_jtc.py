@@ -45,6 +45,18 @@ def test_positions_only_is_linear_with_a_velocity_step_at_each_point():
     assert q == pytest.approx([2.0]) and v == pytest.approx([2.0])   # the step: 1 -> 2 rad/s
 
 
+def test_peak_speed_is_the_points_velocities_or_the_slopes_into_them():
+    # the ceilings' speed allowance: the largest speed at the points within a window
+    lines = JtcTrajectory(one_joint([1.0, 2.0], [1.0, 3.0]), np.zeros(1), np.zeros(1))
+    assert lines.peak_speed(0.5, 1.5) == pytest.approx([1.0])     # into the first point
+    assert lines.peak_speed(0.5, 2.0) == pytest.approx([2.0])
+    assert lines.peak_speed(2.0, 3.0) == pytest.approx([0.0])     # no point within
+    given = JtcTrajectory(one_joint([1.0, 2.0], [1.0, 3.0], [-0.5, None]), np.zeros(1),
+                          np.zeros(1))
+    assert given.peak_speed(0.5, 1.5) == pytest.approx([0.5])
+    assert given.peak_speed(1.5, 2.5) == pytest.approx([2.0])
+
+
 def test_velocities_at_both_ends_make_a_cubic():
     # from rest at 0 to rest at 1 in 1 s: q = 3 t^2 - 2 t^3
     traj = JtcTrajectory(one_joint([1.0], [1.0], [0.0]), np.zeros(1), np.zeros(1))

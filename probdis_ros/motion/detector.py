@@ -78,10 +78,12 @@ samples' second differences) widens the threshold by ``NOISE_SIGMAS`` standard e
 that 0.005 rad of noise at 1 kHz neither hides a stall nor looks like motion.
 
 The ceilings and ``onset_gap`` grow by ``speed_allowance`` x the commanded speed (per joint,
-or L1): the lag that remains in fast free motion.  The **onset** of a block is where the gap
-last began to rise before it crossed that threshold: the arm touched the obstacle there,
-earlier than where it is when the block is declared (it swings and slides on while the
-unblocked joints follow the command).  No rclpy: plain seconds and arrays.
+or L1; the largest over the last ``speed_allowance`` seconds of the command the arm is
+compared with): the lag that remains in fast free motion, for an arm that lags its command
+by up to ``speed_allowance`` more than ``motion_delay``.  The **onset** of a block is where
+the gap last began to rise before it crossed that threshold: the arm touched the obstacle
+there, earlier than where it is when the block is declared (it swings and slides on while
+the unblocked joints follow the command).  No rclpy: plain seconds and arrays.
 """
 
 from __future__ import annotations
@@ -456,7 +458,12 @@ class BlockDetector:
         self._pull = desired - measured
         self.joint_gaps = np.abs(self._pull)
         self.gap = float(self.joint_gaps.sum())
-        allowance = s.speed_allowance * np.abs(velocity)
+        # the lag left in fast free motion: an arm lagging up to speed_allowance more than
+        # motion_delay still moves as fast as the command did then (as a path ends, the
+        # command's speed at one instant fell while such an arm's gap had not: a false block)
+        lagging = t - s.motion_delay
+        allowance = s.speed_allowance * np.maximum(
+            np.abs(velocity), self.path.peak_speed(lagging - s.speed_allowance, lagging))
         self._track_onset(now, measured, velocity, s.onset_gap + float(allowance.sum()))
         self._history.append((now, measured.copy()))
         if t <= ENDS or not self._first:

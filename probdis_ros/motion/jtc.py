@@ -190,6 +190,15 @@ class JtcTrajectory:
         # times of the message's points relative to taken_at
         offset = command.stamp - self.taken_at if command.stamp > 0 else 0.0
         self.times = command.times + offset
+        # each point's speed per joint: its velocities, or where it carries none JTC's
+        # linear interpolation's slope into it (for peak_speed)
+        ahead = command.times[0] - self.before_time     # the first segment's span
+        slopes = np.abs(np.diff(command.positions, axis=0, prepend=self.before[0][None]))
+        slopes /= np.concatenate([[ahead if ahead > 0 else np.inf], np.diff(command.times)])[
+            :, None]
+        given = command.velocities
+        self._speeds = slopes if given is None else np.where(np.isnan(given), slopes,
+                                                             np.abs(given))
 
     @property
     def duration(self) -> float:
@@ -227,6 +236,18 @@ class JtcTrajectory:
         k = int(np.searchsorted(times, t, side='right')) - 1
         return interpolate(t - times[k], times[k + 1] - times[k], self._point(k),
                            self._point(k + 1))
+
+    def peak_speed(self, start: float, end: float) -> np.ndarray:
+        """
+        Return per joint the largest speed at the message's points from start to end [s].
+
+        Zeros where no point falls within; between points the speed is that of one close by
+        (they are a controller period apart in this planner's messages).
+        """
+        first, last = np.searchsorted(self.times, (start, end), side='right')
+        if last <= first:
+            return np.zeros(self._speeds.shape[1])
+        return self._speeds[first:last].max(axis=0)
 
     def at(self, t: float) -> np.ndarray:
         """Return the desired position t seconds after taken_at."""
