@@ -621,20 +621,23 @@ class BlockDetector:
         self.started = True
         if getattr(getattr(self.path, 'command', None), 'stamp', 0.0) > 0:
             return False        # stamped: JTC runs it on its own time line, late or not
-        # when the command was where the arm is (its mean over the last ENDS seconds, at
-        # their mean time), the latest such time: matched by position, not by the distance
-        # from the start, which a command that first brakes from the noise of a measured
-        # velocity at rest and comes back reaches twice (the early time read an arm on time
-        # as 0.2 s late, and the gap it then saw as it moved on was called a block)
-        recent = [(when, q) for when, q in self._history if when >= now - ENDS]
-        where = np.mean([q for _, q in recent], axis=0)
-        at = float(np.mean([when for when, _ in recent])) - self.start_time
-        steps = np.arange(0.0, max(at, 0.0) + 0.005, 0.005)
-        away = np.array([float(np.abs(self._desired(tau)[0] - where).sum()) for tau in steps])
-        nearest = len(steps) - 1 - int(np.argmin(away[::-1]))
-        if away[nearest] > 0.5 * moved:
-            return False        # moved off the command's course: nothing says when it began
-        late = at - steps[nearest]
+        # when the command had moved as far from its start as the arm has from its own (the
+        # arm: its mean over the last ENDS seconds, at their mean time), the last time it
+        # reached that distance up to where the command is now (an arm lagging it less than
+        # motion_delay is ahead of the detector's desired position): a command that first
+        # brakes from the noise of a measured velocity at rest and comes back reaches it
+        # twice, and the first time read an arm on time as 0.2 s late (its gap as it moved
+        # on was called a block).  By distance, not by position: when motion is first seen,
+        # the noise of the means at the joints that do not move is as large as it (a match
+        # of positions failed at 5 mrad of noise)
+        recent = [when for when, _ in self._history if when >= now - ENDS]
+        at = float(np.mean(recent)) - self.start_time
+        steps = np.arange(0.0, max(at + self.settings.motion_delay, 0.0) + 0.005, 0.005)
+        origin = self._desired(0.0)[0]
+        short = np.array([float(np.abs(self._desired(tau)[0] - origin).sum())
+                          for tau in steps]) < moved
+        last = len(steps) - 1 - int(np.argmax(short[::-1]))     # the last still short of it
+        late = at - steps[min(last + 1, len(steps) - 1)]
         if late <= LATE_TAKE:
             return False
         self.late += late

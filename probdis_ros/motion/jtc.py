@@ -190,15 +190,15 @@ class JtcTrajectory:
         # times of the message's points relative to taken_at
         offset = command.stamp - self.taken_at if command.stamp > 0 else 0.0
         self.times = command.times + offset
-        # each point's speed per joint: its velocities, or where it carries none JTC's
-        # linear interpolation's slope into it (for peak_speed)
-        ahead = command.times[0] - self.before_time     # the first segment's span
+        # each point's speed per joint: its velocities, or where it carries none (JTC takes
+        # a row with any NaN as none) the slope of JTC's linear interpolation into it
+        ahead = self.times[0] - self.before_time        # the first segment's span
         slopes = np.abs(np.diff(command.positions, axis=0, prepend=self.before[0][None]))
         slopes /= np.concatenate([[ahead if ahead > 0 else np.inf], np.diff(command.times)])[
             :, None]
         given = command.velocities
-        self._speeds = slopes if given is None else np.where(np.isnan(given), slopes,
-                                                             np.abs(given))
+        self._speeds = slopes if given is None else np.where(
+            np.isnan(given).any(axis=1)[:, None], slopes, np.abs(given))
 
     @property
     def duration(self) -> float:
@@ -241,8 +241,8 @@ class JtcTrajectory:
         """
         Return per joint the largest speed at the message's points from start to end [s].
 
-        Zeros where no point falls within; between points the speed is that of one close by
-        (they are a controller period apart in this planner's messages).
+        Zeros where no point falls within.  At the points only: this planner's messages
+        have one every controller period, so the speed between them is close to theirs.
         """
         first, last = np.searchsorted(self.times, (start, end), side='right')
         if last <= first:
