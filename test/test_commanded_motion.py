@@ -86,6 +86,43 @@ def follows(jtc, settings, blocked_at=np.inf):
     return lambda t: jtc.sample(min(t, blocked_at) - settings.motion_delay)[0]
 
 
+STEP = 0.001    # [s] the simulated arms' time step
+
+
+def lagging(target, lag, q0=Q0):
+    """Return an arm following target(t) with a first-order lag [s]: call it once a STEP."""
+    q = q0.copy()
+
+    def advance(t):
+        q[:] += (target(t) - q) * STEP / lag
+        return q
+    return advance
+
+
+def impedance(target, inertia, stiffness=200.0, damping_ratio=0.7, q0=Q0):
+    """Return an arm held to target(t) by a joint spring and damper on a link's inertia."""
+    q, v = q0.copy(), np.zeros(len(q0))
+    damping = 2 * damping_ratio * np.sqrt(stiffness * inertia)
+
+    def advance(t):
+        v[:] += (stiffness * (target(t) - q) - damping * v) / inertia * STEP
+        q[:] += v * STEP
+        return q
+    return advance
+
+
+def watch(detector, arm, until, rng, noise, every=1):
+    """Move the arm until a verdict other than MOVING, its state every ``every`` STEPs."""
+    verdict = Verdict.MOVING
+    for k in range(round(until / STEP)):
+        q = arm(k * STEP)
+        if k % every == 0:
+            verdict = detector.update(k * STEP, q + rng.normal(0.0, noise, len(q)))
+            if verdict is not Verdict.MOVING:
+                break
+    return verdict
+
+
 # ------------------------------------------------------------------ the stall through noise
 
 
@@ -125,13 +162,9 @@ def test_a_command_from_a_noisy_state_taken_late_is_judged_from_when_it_began(se
     jtc = JtcTrajectory(command, start, None, 0.0)
     controller = JtcTrajectory(command, start, None, 0.0)   # the detector moves jtc's
     detector = BlockDetector(jtc, 0.0, settings, expect_motion=True)
-    arm, step, late = Q0.copy(), 0.001, 0.25
-    for k in range(round((jtc.duration + late + 2.0) / step)):
-        target = controller.sample(k * step - late)[0] if k * step >= late else Q0
-        arm += (target - arm) * step / 0.06
-        verdict = detector.update(k * step, arm + rng.normal(0.0, NOISE, 7))
-        if verdict is not Verdict.MOVING:
-            break
+    late = 0.25
+    arm = lagging(lambda t: controller.sample(t - late)[0] if t >= late else Q0, 0.06)
+    verdict = watch(detector, arm, jtc.duration + late + 2.0, rng, NOISE)
     # late by 0.25 + 0.06 - motion_delay against the detector's desired position
     assert verdict is Verdict.DONE and 0.05 < detector.late <= 0.21, (detector.late,
                                                                        detector.reason)
@@ -150,17 +183,8 @@ def test_an_arm_lagging_more_than_motion_delay_is_not_blocked_as_its_path_ends(i
     motion = from_state(Q0, None, np.array([Q0, far]), limits)
     jtc = JtcTrajectory(motion.command_from_start, Q0, None, 0.0)
     detector = BlockDetector(jtc, 0.0, settings, expect_motion=True)
-    stiffness = 200.0
-    damping = 2 * 0.7 * np.sqrt(stiffness * inertia)
-    q, v, step = Q0.copy(), np.zeros(7), 0.001
-    rng = np.random.default_rng(0)
-    for k in range(round((jtc.duration + 2.0) / step)):
-        if k % 10 == 0:                             # joint states at 100 Hz
-            verdict = detector.update(k * step, q + rng.normal(0.0, 1e-4, 7))
-            if verdict is not Verdict.MOVING:
-                break
-        v += (stiffness * (jtc.sample(k * step)[0] - q) - damping * v) / inertia * step
-        q += v * step
+    arm = impedance(lambda t: jtc.sample(t)[0], inertia)
+    verdict = watch(detector, arm, jtc.duration + 2.0, np.random.default_rng(0), 1e-4, 10)
     assert verdict is Verdict.DONE, detector.reason
 
 
@@ -240,14 +264,8 @@ def test_an_arm_on_time_is_not_judged_late_where_its_command_first_swings_out_an
     back = -(Q1 - Q0) / np.abs(Q1 - Q0).sum() * speed
     jtc = JtcTrajectory(from_state(Q0, back, np.array([Q0, Q1]), limits).command, Q0, back, 0.0)
     detector = BlockDetector(jtc, 0.0, settings, expect_motion=True)
-    rng = np.random.default_rng(0)
-    arm, step, lag = Q0.copy(), 0.001, 0.06      # lagging its command by less than motion_delay
-    for k in range(round((jtc.duration + 2.0) / step)):
-        arm += (jtc.sample(k * step)[0] - arm) * step / lag
-        if k % 10 == 0:                             # joint states at 100 Hz
-            verdict = detector.update(k * step, arm + rng.normal(0.0, 0.001, 7))
-            if verdict is not Verdict.MOVING:
-                break
+    arm = lagging(lambda t: jtc.sample(t)[0], 0.06)     # less than motion_delay behind
+    verdict = watch(detector, arm, jtc.duration + 2.0, np.random.default_rng(0), 0.001, 10)
     assert verdict is Verdict.DONE and detector.late == 0.0, (detector.late, detector.reason)
 
 
