@@ -166,8 +166,8 @@ def test_a_command_from_a_noisy_state_taken_late_is_judged_from_when_it_began(se
     arm = lagging(lambda t: controller.sample(t - late)[0] if t >= late else Q0, 0.06)
     verdict = watch(detector, arm, jtc.duration + late + 2.0, rng, NOISE)
     # late by 0.25 + 0.06 - motion_delay against the detector's desired position
-    assert verdict is Verdict.DONE and 0.05 < detector.late <= 0.21, (detector.late,
-                                                                       detector.reason)
+    assert verdict is Verdict.DONE and 0.05 < detector.late <= 0.21, \
+        (detector.late, detector.reason)
 
 
 @pytest.mark.parametrize('inertia', [3.0, 5.0])
