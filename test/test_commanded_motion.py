@@ -73,12 +73,7 @@ def trajectory(q0=Q0, q1=Q1) -> JtcTrajectory:
 
 def judge(detector, arm, until, seed=0):
     """Feed arm(t) plus noise at RATE until a verdict other than MOVING; return (t, verdict)."""
-    rng = np.random.default_rng(seed)
-    for t in np.arange(0.0, until, 1.0 / RATE):
-        verdict = detector.update(t, arm(t) + rng.normal(0.0, NOISE, 7))
-        if verdict is not Verdict.MOVING:
-            return t, verdict
-    return None, Verdict.MOVING
+    return watch(detector, arm, until, np.random.default_rng(seed), NOISE)
 
 
 def follows(jtc, settings, blocked_at=np.inf):
@@ -86,7 +81,7 @@ def follows(jtc, settings, blocked_at=np.inf):
     return lambda t: jtc.sample(min(t, blocked_at) - settings.motion_delay)[0]
 
 
-STEP = 0.001    # [s] the simulated arms' time step
+STEP = 1.0 / RATE    # [s] the simulated arms' time step
 
 
 def lagging(target, lag, q0=Q0):
@@ -112,15 +107,18 @@ def impedance(target, inertia, stiffness=200.0, damping_ratio=0.7, q0=Q0):
 
 
 def watch(detector, arm, until, rng, noise, every=1):
-    """Move the arm until a verdict other than MOVING, its state every ``every`` STEPs."""
-    verdict = Verdict.MOVING
-    for k in range(round(until / STEP)):
-        q = arm(k * STEP)
+    """
+    Run arm(t) every STEP, its state plus noise every ``every`` STEPs, until a verdict.
+
+    Return (t, verdict), (None, MOVING) where none other came by until.
+    """
+    for k, t in enumerate(np.arange(0.0, until, STEP)):
+        q = arm(t)
         if k % every == 0:
-            verdict = detector.update(k * STEP, q + rng.normal(0.0, noise, len(q)))
+            verdict = detector.update(t, q + rng.normal(0.0, noise, len(q)))
             if verdict is not Verdict.MOVING:
-                break
-    return verdict
+                return t, verdict
+    return None, Verdict.MOVING
 
 
 # ------------------------------------------------------------------ the stall through noise
@@ -164,7 +162,7 @@ def test_a_command_from_a_noisy_state_taken_late_is_judged_from_when_it_began(se
     detector = BlockDetector(jtc, 0.0, settings, expect_motion=True)
     late = 0.25
     arm = lagging(lambda t: controller.sample(t - late)[0] if t >= late else Q0, 0.06)
-    verdict = watch(detector, arm, jtc.duration + late + 2.0, rng, NOISE)
+    _, verdict = watch(detector, arm, jtc.duration + late + 2.0, rng, NOISE)
     # late by 0.25 + 0.06 - motion_delay against the detector's desired position
     assert verdict is Verdict.DONE and 0.05 < detector.late <= 0.21, \
         (detector.late, detector.reason)
@@ -184,7 +182,7 @@ def test_an_arm_lagging_more_than_motion_delay_is_not_blocked_as_its_path_ends(i
     jtc = JtcTrajectory(motion.command_from_start, Q0, None, 0.0)
     detector = BlockDetector(jtc, 0.0, settings, expect_motion=True)
     arm = impedance(lambda t: jtc.sample(t)[0], inertia)
-    verdict = watch(detector, arm, jtc.duration + 2.0, np.random.default_rng(0), 1e-4, 10)
+    _, verdict = watch(detector, arm, jtc.duration + 2.0, np.random.default_rng(0), 1e-4, 10)
     assert verdict is Verdict.DONE, detector.reason
 
 
@@ -265,7 +263,7 @@ def test_an_arm_on_time_is_not_judged_late_where_its_command_first_swings_out_an
     jtc = JtcTrajectory(from_state(Q0, back, np.array([Q0, Q1]), limits).command, Q0, back, 0.0)
     detector = BlockDetector(jtc, 0.0, settings, expect_motion=True)
     arm = lagging(lambda t: jtc.sample(t)[0], 0.06)     # less than motion_delay behind
-    verdict = watch(detector, arm, jtc.duration + 2.0, np.random.default_rng(0), 0.001, 10)
+    _, verdict = watch(detector, arm, jtc.duration + 2.0, np.random.default_rng(0), 0.001, 10)
     assert verdict is Verdict.DONE and detector.late == 0.0, (detector.late, detector.reason)
 
 

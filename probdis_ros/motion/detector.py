@@ -477,7 +477,7 @@ class BlockDetector:
             self.reason = (f'the measured positions followed the command as the driver '
                            f'sends it for {s.echo_time:.1f} s')
             return Verdict.ECHO
-        if not self.started and self._begins_late(now, t):
+        if not self.started and self._begins_late(now):
             return Verdict.MOVING           # judged from when it began, from the next sample
         if self._pressed is not None:
             if not self._released(now, t, desired, measured, ended):
@@ -605,7 +605,7 @@ class BlockDetector:
         return (float(np.abs(last.mean(axis=0) - first.mean(axis=0)).sum()),
                 self.settings.stall_motion + NOISE_SIGMAS * float(error.sum()))
 
-    def _begins_late(self, now: float, t: float) -> bool:
+    def _begins_late(self, now: float) -> bool:
         """
         Tell whether the arm, still until now, has begun to move later than the command said.
 
