@@ -930,6 +930,13 @@ def _plot_bag(scene_name: str, bag: str, out: str) -> Path:
 
 def cmd_replay(args: argparse.Namespace) -> int:
     """Rerun the blocked-motion detector on a bag; rebuild the failure map."""
+    if args.calibrate:
+        clash = [flag for flag, given in (('--motion-delay', args.motion_delay is not None),
+                                          ('--save-map', args.save_map),
+                                          ('--publish', args.publish)) if given]
+        if clash:
+            raise UsageError(f'--calibrate tries every motion_delay itself: not with '
+                             f'{" or ".join(clash)}')
     if args.publish:
         return _publish_bag(args)
     if args.rate is not None or args.wait is not None:
@@ -938,8 +945,55 @@ def cmd_replay(args: argparse.Namespace) -> int:
     for flag, out in (('--save-map', args.save_map), ('--plot', args.plot)):
         if out:
             _check_output(out, flag)
+    if args.calibrate:
+        return _calibrate_bag(args, overrides)
     with _map_held(args.save_map):
         return _replay_bag(args, overrides)
+
+
+def _calibrate_bag(args: argparse.Namespace, overrides: dict[str, float]) -> int:
+    """Replay a free move at every motion delay; print (and draw) the one that fits best."""
+    import time
+
+    from probdis_ros.experiments.sweep import progress_line
+    from probdis_ros.ros.replay import calibrate, ReplayError, SettingsError
+
+    t0 = time.monotonic()
+    progress = (lambda done, total: progress_line(done, total, time.monotonic() - t0,
+                                                  'motion delays')) \
+        if sys.stderr.isatty() else None
+    try:
+        fit = calibrate(args.bag, args.joint_states, args.trajectory, overrides, progress=progress)
+    except SettingsError as err:
+        given = ' '.join(f'--{k.replace("_", "-")} {v:g}' for k, v in overrides.items())
+        raise UsageError(f'{given}: {err}') from None
+    except ReplayError as err:
+        raise UsageError(str(err)) from None
+    if args.plot:
+        from probdis_ros.plots import plot_calibration
+
+        plot_calibration(fit, args.plot)
+    if args.json:
+        _print_json(fit.summary())
+        return 0
+    low, high = fit.equal
+    equal = f' (the middle of {low:g}-{high:g} s, all as good)' if high > low else ''
+    print(f'{args.bag}: motion_delay {fit.best:g} s fits this arm best{equal}: peak gap '
+          f'{fit.best_gap:.3f} rad ({fit.peak_gaps[0]:.3f} rad at {fit.delays[0]:g} s); at rest '
+          f'after a command {fit.rest_gap:.3f} rad (d_dist {fit.d_dist:g})')
+    print('  motion_delay [s]  peak gap [rad]  blocks')
+    for delay, gap, blocks in zip(fit.delays, fit.peak_gaps, fit.blocks):
+        mark = '  <- best' if delay == fit.best else '  <- as good' if low <= delay <= high \
+            else ''
+        print(f'  {delay:16.2f}  {gap:14.3f}  {blocks:6d}{mark}')
+    if high == fit.delays[-1]:
+        print(f'  note: the least gap lies at the end of the range: the arm lags its command '
+              f'by {fit.best:g} s or more, or the bag is not of a free move')
+    print(f'set it: probdis param set motion_delay {fit.best:g} (or motion_delay in the '
+          f"planner's parameter file)")
+    if args.plot:
+        print(f'wrote {args.plot}')
+    return 0
 
 
 def _replay_bag(args: argparse.Namespace, overrides: dict[str, float]) -> int:
@@ -1271,7 +1325,14 @@ def build_parser() -> argparse.ArgumentParser:
                     '"success", "peak_gap_rad", "peak_point_speed_mps", '
                     '"peak_external_torque_nm" (per joint, efforts less gravity and '
                     'dynamics; null without efforts)}')
-    rp.add_argument('--plot', metavar='OUT.png', help='joint gaps and the flange path')
+    rp.add_argument('--plot', metavar='OUT.png', help='joint gaps and the flange path (with '
+                    '--calibrate: the peak gap at each motion delay)')
+    rp.add_argument('--calibrate', action='store_true',
+                    help='on a bag of a free move: replay it at every motion_delay from 0 to '
+                    '0.4 s and print the one with the least peak gap, the lag of the arm '
+                    '(--json: {"motion_delay_s", "peak_gap_rad", "equally_good_s", '
+                    '"rest_gap_rad", "d_dist_rad", "tried": [{"motion_delay_s", "peak_gap_rad", '
+                    '"blocks"}]})')
     rp.add_argument('--save-map', metavar='FILE', help='write the rebuilt failure map')
     rp.add_argument('--publish', action='store_true',
                     help='republish the messages on their topics with their recorded timing')

@@ -210,11 +210,33 @@ def plot_replay(result, out: str | Path, d_dist: float) -> Path:
     ax3.set_title('flange path')
     fig.suptitle(f'{result.paths} path(s), {len(result.blocks)} block(s), '
                  f'{"success" if result.success else "not disentangled"}')
-    out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=110, bbox_inches='tight')
-    plt.close(fig)
-    return out
+    return _save(fig, out)
+
+
+def plot_calibration(fit, out: str | Path) -> Path:
+    """Draw a free move's peak gap at each motion delay, the blocked ones and the best."""
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    delays, gaps = np.array(fit.delays), np.array(fit.peak_gaps)
+    blocked = np.array(fit.blocks) > 0
+    fig, ax = plt.subplots(figsize=(6.0, 4.0))
+    ax.plot(delays, gaps, color='tab:blue', lw=1, marker='.', label='peak gap, free')
+    if blocked.any():
+        ax.plot(delays[blocked], gaps[blocked], ls='none', marker='x', color='tab:red',
+                label='read as blocked')
+    low, high = fit.equal
+    if high > low:
+        ax.axvspan(low, high, color='tab:green', alpha=0.15, label='as good as the least')
+    ax.axvline(fit.best, color='black', ls=':', lw=1.2,
+               label=f'best: {fit.best:g} s, {fit.best_gap:.3f} rad')
+    ax.set_xlabel('motion_delay [s]')
+    ax.set_ylabel('peak L1 gap to the command [rad]')
+    ax.set_ylim(bottom=0.0)
+    ax.legend(fontsize=8)
+    ax.set_title('the lag of the arm: the motion_delay of the least peak gap')
+    return _save(fig, out)
 
 
 def _mark_blocks(ax, blocks) -> None:

@@ -264,19 +264,27 @@ def test_states_are_replayed_at_the_times_the_planner_dated_them(tmp_path, recor
     np.testing.assert_allclose(np.array(result.times) + t0, expected, atol=1e-6)
 
 
-def test_a_free_move_gives_the_least_peak_gap_at_the_arms_own_lag_and_its_top_speed(
-        tmp_path):
-    # README: motion_delay is measured on the arm by replaying a free move with several
+def free_move_bag(path, lag):
+    """Write a bag of a free move by an arm that follows its command lag [s] late; its timing."""
     arm = iiwa_arm()
-    path = np.array([WORLD.start, WORLD.start + np.array([0.8, -0.4, 0.0, 0.6, 0.0, -0.5, 1.2])])
-    timed = time_path(path, arm.velocity_limits, 0.5)
-    lag = 0.08
-    messages = [(int(1e9), JS, js_message(JOINTS, path[0], 1.0)),
+    moves = np.array([WORLD.start, WORLD.start + np.array([0.8, -0.4, 0.0, 0.6, 0.0, -0.5,
+                                                           1.2])])
+    timed = time_path(moves, arm.velocity_limits, 0.5)
+    messages = [(int(1e9), JS, js_message(JOINTS, moves[0], 1.0)),
                 (int(1.05e9), TRAJ, traj_message(timed, JOINTS))]
     for t in np.arange(0.05, timed.duration + 1.0, 1.0 / RATE):
         messages.append((int((1.0 + t) * 1e9), JS,
                          js_message(JOINTS, timed.at(max(t - 0.05 - lag, 0.0)), 1.0 + t)))
-    write_bag(tmp_path / 'bag', messages, *FORMATS[0])
+    write_bag(path, messages, *FORMATS[0])
+    return timed
+
+
+def test_a_free_move_gives_the_least_peak_gap_at_the_arms_own_lag_and_its_top_speed(
+        tmp_path):
+    # README: motion_delay is measured on the arm by replaying a free move with several
+    arm = iiwa_arm()
+    lag = 0.08
+    timed = free_move_bag(tmp_path / 'bag', lag)
     peaks = {delay: replay(tmp_path / 'bag', overrides={'motion_delay': delay}).peak_gap
              for delay in (0.0, 0.04, lag, 0.12, 0.16)}
     assert min(peaks, key=peaks.get) == lag, peaks
@@ -289,6 +297,29 @@ def test_a_free_move_gives_the_least_peak_gap_at_the_arms_own_lag_and_its_top_sp
     assert truth > 0.3
     fastest = replay(tmp_path / 'bag').summary()['peak_point_speed_mps']
     assert fastest == pytest.approx(truth, rel=0.03)
+
+
+@pytest.mark.parametrize('lag', [0.03, 0.17])
+def test_calibrate_finds_the_arms_lag_in_a_free_move_and_refuses_a_blocked_one(tmp_path, lag):
+    # README, first session: one command instead of a replay per motion_delay by hand
+    free_move_bag(tmp_path / 'free', lag)
+    result = run_replay(tmp_path / 'free', '--calibrate', '--json', '--plot',
+                        str(tmp_path / 'lag.png'))
+    assert result.returncode == 0, result.stderr
+    fit = json.loads(result.stdout)
+    assert fit['motion_delay_s'] == pytest.approx(lag, abs=0.011), fit
+    low, high = fit['equally_good_s']
+    assert low <= fit['motion_delay_s'] <= high and high - low <= 0.02, fit
+    gaps = {row['motion_delay_s']: row['peak_gap_rad'] for row in fit['tried']}
+    assert len(gaps) == 41 and min(gaps.values()) == fit['peak_gap_rad']
+    assert fit['peak_gap_rad'] < 0.25 * max(gaps[0.0], gaps[0.4]), fit
+    assert (tmp_path / 'lag.png').stat().st_size > 10_000
+    # the arm stopped by a block: no delay makes it free, and none is proposed
+    messages, _, _ = simulated_run()
+    write_bag(tmp_path / 'blocked', messages, *FORMATS[0])
+    result = run_replay(tmp_path / 'blocked', '--calibrate')
+    assert result.returncode == 2 and result.stdout == '', result
+    assert 'not one free move at any motion_delay' in result.stderr
 
 
 @pytest.mark.parametrize('short', [0.03, 0.12])
@@ -700,7 +731,11 @@ def test_bad_replay_flags_are_refused_before_the_bag_is_read(tmp_path):
              'must exceed d_dist 0.5'),
             (('--save-map', str(tmp_path)), f'--save-map {tmp_path}: is a directory'),
             (('--plot', str(keep / 'x.png')), f'{keep} is not a directory'),
-            (('--rate', '2'), '--rate and --wait go with --publish')]:
+            (('--rate', '2'), '--rate and --wait go with --publish'),
+            (('--calibrate', '--motion-delay', '0.1'), '--calibrate tries every motion_delay '
+             'itself: not with --motion-delay'),
+            (('--calibrate', '--save-map', str(keep), '--publish'),
+             'not with --save-map or --publish')]:
         result = run_replay(tmp_path / 'bag', *args)
         assert result.returncode == 2 and result.stdout == '', (args, result.stderr)
         assert result.stderr.count('\n') == 1 and result.stderr.startswith(

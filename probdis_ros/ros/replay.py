@@ -70,6 +70,11 @@ TRAJECTORY_TYPE = 'trajectory_msgs/msg/JointTrajectory'
 #: alike (rounding); beyond it, the planner knew a delivery the bag does not show (a rise of
 #: the clocks' offset, DRIFT_NOISE 1e-4 s or more), and its time is the one recorded
 REDATING_TOLERANCE = 1e-5
+#: The motion delays ``probdis replay --calibrate`` tries [s]: 0 to 0.4 s by 0.01 s (an arm
+#: in joint impedance at 200 Nm/rad lagged its command by up to 0.24 s on the physics mock)
+CALIBRATION_DELAYS = tuple(round(0.01 * k, 2) for k in range(41))
+#: Peak gaps within this [rad], or this share of the least, are as good as the least
+EQUAL_GAP, EQUAL_SHARE = 0.001, 0.02
 
 
 class ReplayError(Exception):
@@ -449,3 +454,81 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
     if status_paths:
         result.paths = sum(status_paths)
     result.success = last_path_done
+
+
+@dataclass
+class Calibration:
+    """
+    The peak gap of a free move at each motion delay tried, and the delay that fits best.
+
+    ``best``: of the delays at which the bag reads as one free move (one path, no block),
+    the one with the least peak gap, the arm's own lag (README, "Pointing it at the real arm",
+    step 4); where the delays about it give gaps as small (``equal``), their middle.
+    """
+
+    delays: list[float]
+    peak_gaps: list[float]
+    blocks: list[int]
+    best: float
+    equal: tuple[float, float]   # the delays about the least gap with gaps as good [s]
+    rest_gap: float          # the largest gap at rest after a command at the best delay [rad]
+    d_dist: float
+
+    @property
+    def best_gap(self) -> float:
+        """Return the peak gap at the best delay [rad]."""
+        return self.peak_gaps[self.delays.index(self.best)]
+
+    def summary(self) -> dict:
+        """Return the JSON summary of ``probdis replay --calibrate --json``."""
+        return {'motion_delay_s': self.best, 'peak_gap_rad': self.best_gap,
+                'equally_good_s': list(self.equal), 'rest_gap_rad': self.rest_gap,
+                'd_dist_rad': self.d_dist,
+                'tried': [{'motion_delay_s': d, 'peak_gap_rad': g, 'blocks': b}
+                          for d, g, b in zip(self.delays, self.peak_gaps, self.blocks)]}
+
+
+def calibrate(bag: str | Path, joint_states_topic: str = JOINT_STATES_TOPIC,
+              trajectory_topic: str = TRAJECTORY_TOPIC, overrides: dict | None = None,
+              delays: tuple[float, ...] = CALIBRATION_DELAYS,
+              progress=None) -> Calibration:
+    """
+    Replay a bag of a free move at each of delays; raise ReplayError where it cannot tell.
+
+    One replay per delay, with the detector's other settings as recorded (or overrides);
+    ``progress(done, total)`` is called after each.  A bag without a path, or with a block at
+    every delay (not a free move), tells no delay.
+    """
+    results = []
+    for k, delay in enumerate(delays):
+        results.append(replay(bag, joint_states_topic, trajectory_topic,
+                              overrides={**(overrides or {}), 'motion_delay': delay}))
+        if progress is not None:
+            progress(k + 1, len(delays))
+    if not any(r.paths for r in results):
+        raise ReplayError(f'{bag}: no path in the bag: record a free move of the arm '
+                          f'(one path to a goal with nothing in reach)')
+    # one path and no block: a block the detector sees at a short delay goes unseen at a
+    # long one (the retreat then reads as a second path), and its gap is no lag
+    free = [k for k, r in enumerate(results) if not r.blocks and r.paths == 1]
+    if not free:
+        raise ReplayError(
+            f'{bag}: not one free move at any motion_delay from {delays[0]:g} to '
+            f'{delays[-1]:g} s (a block, or more than one path): record one path to a goal '
+            f'with nothing in reach; where the live run called it blocked, record it again '
+            f'with a longer motion_delay (0.3 s); or d_dist is below what the arm keeps at rest')
+    least = min(free, key=lambda k: results[k].peak_gap)
+    # delays about the least whose gaps tell nothing apart (an arm that lags like a filter,
+    # not a pure delay, has a flat bottom): the middle, since an arm lagging more than
+    # motion_delay is what the detector may call blocked (README, the allowance)
+    near = results[least].peak_gap + max(EQUAL_GAP, EQUAL_SHARE * results[least].peak_gap)
+    low = high = least
+    while low - 1 in free and results[low - 1].peak_gap <= near:
+        low -= 1
+    while high + 1 in free and results[high + 1].peak_gap <= near:
+        high += 1
+    best = (low + high) // 2
+    return Calibration(list(delays), [r.peak_gap for r in results],
+                       [len(r.blocks) for r in results], delays[best],
+                       (delays[low], delays[high]), results[best].rest_gap,
+                       results[best].settings.d_dist)
