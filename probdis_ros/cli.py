@@ -986,6 +986,10 @@ def _calibrate_bag(args: argparse.Namespace, overrides: dict[str, float]) -> int
         mark = '  <- best' if delay == fit.best else '  <- as good' if low <= delay <= high \
             else ''
         print(f'  {delay:16.2f}  {gap:14.3f}  {blocks:6d}{mark}')
+    if fit.rest_gap > 0.5 * fit.d_dist:
+        print(f'  note: the arm rests {fit.rest_gap:.3f} rad off its command, more than half of '
+              f'd_dist {fit.d_dist:g}: a free path ending above d_dist reads as blocked; raise '
+              f'd_dist, or mend the load data (load_mass, load_com)')
     if high == fit.delays[-1]:
         print(f'  note: the least gap lies at the end of the range: the arm lags its command '
               f'by {fit.best:g} s or more, or the bag is not of a free move')
