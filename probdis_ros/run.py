@@ -389,6 +389,9 @@ class Run:
         self.blocked_still = False                       # ... without having moved the arm
         self._recent: deque[tuple[float, np.ndarray]] = deque()     # (time, measured)
         self.latencies: list[float] = []
+        # the latest any command of the run began against motion_delay [s]: JTC took it late,
+        # or the arm lags more than motion_delay (the detector shifts such a command)
+        self.late_take_max = 0.0
         # per joint, the largest external torque estimated (torque_observer) while the run
         # drove the arm [Nm] (None: the joint states carry no efforts)
         self.torque_peak: np.ndarray | None = None
@@ -498,6 +501,7 @@ class Run:
                 seen: np.ndarray, velocity: np.ndarray | None) -> None:
         """Answer a verdict on the state (now, seen) from the newest (velocity: its own)."""
         self._judged = None
+        self.late_take_max = max(self.late_take_max, detector.late)
         self.rest_at = self.measured.copy()
         # blocked twice running without the arm moving at all: a retreat that never moves is
         # blocked (the arm pressed from behind too), and the path after it begins pressed, so
@@ -1051,6 +1055,7 @@ class Run:
             # per joint, the largest external torque estimated from the efforts [Nm]
             'peak_external_torque_nm': None if self.torque_peak is None else
             [round(float(t), 1) for t in self.torque_peak],
+            'late_take_max_s': round(self.late_take_max, 3),
             'proposal': self.proposals,
             # the via points [rad] of the path awaiting confirmation (confirm_paths)
             'proposed_path': None if self.proposed is None else self.proposed.tolist(),

@@ -584,6 +584,25 @@ def test_a_block_seen_in_a_burst_of_states_is_answered_from_the_newest():
     assert np.abs(retreat.positions[0] - arm(burst[-1])).max() < 1e-9
 
 
+@pytest.mark.parametrize('extra', [0.0, 0.15])
+def test_a_run_tells_how_late_its_commands_began_against_motion_delay(extra):
+    # an arm lagging more than motion_delay (a load, a softer stiffness than calibrated)
+    # looks like a command taken late: the detector shifts it, silently before; the status
+    # (and the node's log at the run's end) now says by how much, so that the user measures
+    # the lag again (probdis replay BAG --calibrate)
+    loop = Disentangler(ARM, Planner(), Q1, max_paths=5, seed=0, goal_tolerance=0.04)
+    run = Run(ARM, loop, RunSettings(), clock=lambda: run._now)
+    run.start(0.0, Q0)
+    run.on_plan(loop.next_path(Q0))
+    jtc, delay = run.trajectory, run.settings.detection.motion_delay
+    for t in np.arange(0.01, jtc.duration + 2.0, 0.01):
+        run.on_joint_state(t, jtc.sample(t - delay - extra)[0])
+        if not run.active:
+            break
+    assert run.outcome == 'succeeded' and not learned(run), run.message
+    assert run.status()['late_take_max_s'] == pytest.approx(extra, abs=0.02)
+
+
 @pytest.mark.parametrize('start', ['measured', 'desired'])
 def test_a_blocked_retreat_is_stopped_at_once_not_run_on_while_the_next_plan_is_made(start):
     # JTC runs a command to its end: a retreat blocked and left running would wind its

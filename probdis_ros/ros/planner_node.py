@@ -1199,6 +1199,14 @@ class PlannerNode(Node):
             f' (peak external torque {peak.max():.1f} Nm at A{int(peak.argmax()) + 1}, '
             f'efforts less gravity and dynamics)')
         self.get_logger().info(f'run ended: {self.run.outcome}: {self.run.message}{pressed}')
+        late, delay = self.run.late_take_max, self.get_parameter('motion_delay').value
+        if late > 0.0:      # the detector shifts commands begun more than LATE_TAKE late
+            self.get_logger().warning(
+                f'commands of this run began up to {late:.2f} s later than motion_delay '
+                f'({delay:g} s) expects: JTC took them late, or the arm lags its commands more '
+                f'than motion_delay (measure it on a free move: probdis replay BAG '
+                f'--calibrate); a lag beyond motion_delay + speed_allowance reads as a block '
+                f'as a path ends')
         if self.recorder is not None:
             self.recorder_close_at = self._now() + 0.5
         if self.run.outcome in ('succeeded', 'gave_up'):
