@@ -951,6 +951,12 @@ def cmd_replay(args: argparse.Namespace) -> int:
         return _replay_bag(args, overrides)
 
 
+def _settings_refused(overrides: dict[str, float], err: Exception) -> UsageError:
+    """Return the usage error of detector flags the detector's other settings refuse."""
+    given = ' '.join(f'--{k.replace("_", "-")} {v:g}' for k, v in overrides.items())
+    return UsageError(f'{given}: {err}')
+
+
 def _calibrate_bag(args: argparse.Namespace, overrides: dict[str, float]) -> int:
     """Replay a free move at every motion delay; print (and draw) the one that fits best."""
     import time
@@ -965,8 +971,7 @@ def _calibrate_bag(args: argparse.Namespace, overrides: dict[str, float]) -> int
     try:
         fit = calibrate(args.bag, args.joint_states, args.trajectory, overrides, progress=progress)
     except SettingsError as err:
-        given = ' '.join(f'--{k.replace("_", "-")} {v:g}' for k, v in overrides.items())
-        raise UsageError(f'{given}: {err}') from None
+        raise _settings_refused(overrides, err) from None
     except ReplayError as err:
         raise UsageError(str(err)) from None
     if args.plot:
@@ -992,7 +997,7 @@ def _calibrate_bag(args: argparse.Namespace, overrides: dict[str, float]) -> int
               f'd_dist, or mend the load data (load_mass, load_com)')
     if high == fit.delays[-1]:
         print(f'  note: the least gap lies at the end of the range: the arm lags its command '
-              f'by {fit.best:g} s or more, or the bag is not of a free move')
+              f'by {high:g} s or more, or the bag is not of a free move')
     print(f'set it: probdis param set motion_delay {fit.best:g} (or motion_delay in the '
           f"planner's parameter file)")
     if args.plot:
@@ -1008,8 +1013,7 @@ def _replay_bag(args: argparse.Namespace, overrides: dict[str, float]) -> int:
     try:
         result = replay(args.bag, args.joint_states, args.trajectory, overrides=overrides)
     except SettingsError as err:
-        given = ' '.join(f'--{k.replace("_", "-")} {v:g}' for k, v in overrides.items())
-        raise UsageError(f'{given}: {err}') from None
+        raise _settings_refused(overrides, err) from None
     except ReplayError as err:
         if err.partial is None:
             raise UsageError(str(err)) from None

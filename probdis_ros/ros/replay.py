@@ -496,8 +496,8 @@ def calibrate(bag: str | Path, joint_states_topic: str = JOINT_STATES_TOPIC,
     Replay a bag of a free move at each of delays; raise ReplayError where it cannot tell.
 
     One replay per delay, with the detector's other settings as recorded (or overrides);
-    ``progress(done, total)`` is called after each.  A bag without a path, or with a block at
-    every delay (not a free move), tells no delay.
+    ``progress(done, total)`` is called after each.  A bag without a path, or that is not one
+    free move (one path, no block) at any delay, tells no delay.
     """
     results = []
     for k, delay in enumerate(delays):
