@@ -92,6 +92,27 @@ def test_the_mock_arms_time_starts_at_its_first_tick_not_at_its_construction(ros
         node.destroy_node()
 
 
+def test_a_starved_mock_takes_a_command_at_the_wall_clock_not_its_lagging_time(ros):
+    # a real JTC takes a message at its first update after it arrives; the mock, behind the
+    # wall clock (its executor starved by a plan in the same interpreter), queued it at its
+    # own lagging time: the arm ran ahead of the planner's model by up to CATCH_UP and,
+    # matching the raw command, a run stopped as an echoing driver (a CI failure)
+    overrides = [Parameter('engine', value='kinematic'),
+                 Parameter('scenario', value=str(scenario_path('demo_iiwa')))]
+    node = MockIiwa(context=ros.context, parameter_overrides=overrides)    # not spun
+    try:
+        node._tick()                            # its time starts
+        began = time.monotonic()
+        time.sleep(0.06)                        # starved: no tick for 60 ms
+        start = node.q.copy()
+        node._on_trajectory(trajectory_msg(TrajectoryCommand(np.array([0.0, 1.0]), np.array(
+            [start, start + 0.1])), list(JOINTS)))
+        taken = node.robot._in_flight[-1][0]     # the arm's time JTC takes it at
+        assert 0.05 <= taken <= time.monotonic() - began + 0.011, taken
+    finally:
+        node.destroy_node()
+
+
 class SteadyStates:
     """Publishes q from the probe at rate Hz until cancel() (a flag: no timer races)."""
 
