@@ -33,7 +33,16 @@ _DOMAINS = itertools.count()
 
 
 def next_domain() -> int:
-    """Return a DDS domain no other test of this run is using (1-101, cycling)."""
+    """
+    Return a DDS domain no other test of this run is using (1-101, cycling).
+
+    Tests on DDS run one at a time (``make test`` runs the others in parallel workers,
+    whose domains would collide, and whose load would slow the nodes' timing): such a
+    test must be marked ``ros``.
+    """
+    if int(os.environ.get('PYTEST_XDIST_WORKER_COUNT') or 1) > 1:
+        raise RuntimeError('a test that uses DDS runs alone: mark it @pytest.mark.ros '
+                           '(make test runs those one at a time, after the others)')
     return 1 + (_DOMAIN_BASE + next(_DOMAINS)) % 101
 
 

@@ -76,7 +76,7 @@ def test_a_killed_sweep_resumes_to_the_same_episodes_without_duplicates(tmp_path
     episodes = out / EPISODES_FILE
     sweep = subprocess.Popen([*probdis_command(), 'experiment', 'sweep', *SWEEP,
                               '--out', str(out)], start_new_session=True)
-    deadline = time.monotonic() + 120
+    deadline = time.monotonic() + 300     # a liveness guard: kernels may compile first
     while not (episodes.exists() and len(read_episodes(episodes)) >= 5):
         assert time.monotonic() < deadline and sweep.poll() is None, 'no episodes written'
         time.sleep(0.05)

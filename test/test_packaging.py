@@ -71,6 +71,7 @@ def test_a_robot_pc_installs_the_versions_the_tests_run_with():
     assert _pins('numpy1-pinocchio.txt')['pin'] == tested['pin']
 
 
+@pytest.mark.ros
 def test_colcon_build_installs_the_executable_and_the_share_files(tmp_path):
     source = copy_source_tree(tmp_path / 'src' / 'probdis_ros')
     build = subprocess.run(

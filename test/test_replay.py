@@ -837,6 +837,7 @@ def test_publish_mode_delivers_every_message_in_order_with_its_timing(tmp_path):
     assert 0.8 * span < arrivals[-1] - arrivals[0] < 2.0 * span
 
 
+@pytest.mark.ros
 def test_publish_mode_with_nothing_to_publish_publishes_nothing(tmp_path):
     # a bag of the commands alone: rosbags reads an empty selection of topics as every
     # message, and the player looked up a publisher it never made (KeyError, a traceback)
