@@ -52,7 +52,7 @@ $(BENCH_STAMP): .ci/requirements/bench.txt $(STAMP)
 	@touch $(BENCH_STAMP)
 
 # The tests that use DDS (marked ros: real nodes, timed motions) run one at a time after the
-# others, which run in TEST_WORKERS processes (pytest-xdist): about 14 instead of 18 minutes
+# others, which run in TEST_WORKERS processes (pytest-xdist): about 15 instead of 17-19 minutes
 # on two cores.  `pytest test` alone runs the whole suite in one process.
 TEST_WORKERS ?= 2
 
