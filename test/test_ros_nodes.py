@@ -701,6 +701,39 @@ def test_a_clock_step_on_the_arm_stops_the_run_with_a_stop_jtc_takes(ros, tmp_pa
     np.testing.assert_allclose(arm.q, end, atol=0.01)
 
 
+def test_a_step_of_this_hosts_clock_stops_the_run_from_where_the_arm_is(ros, tmp_path):
+    # this computer's clock steps 0.4 s ahead mid-motion (an NTP step), seen as the node
+    # reads it: the node's time goes on without the step, and the run stops, decelerating
+    # from where the arm is, learning nothing (before, commands were timed by the new clock
+    # and states dated by the old one: in a review's script a false block was learned)
+    node = planner(ros, tmp_path)
+    arm = mock(ros, free_scenario(tmp_path))
+    wait_for(lambda: ros.call('start').success, 20, 'start')
+    wait_for(lambda: ros.status.get('state') == 'executing', 20, 'motion')
+    time.sleep(0.3)
+    count = len(ros.trajectories)
+    read = node.host_clock.read
+
+    def stepped():
+        before, wall, after = read()
+        return before, wall + 0.4, after
+
+    node.host_clock.read = stepped
+    wait_for(lambda: ros.status.get('state') == 'stopped', 2, 'the stop')
+    q_then = np.array(arm.q)
+    assert "this host's clock stepped +0.400 s" in ros.status['message']
+    assert ros.status['failures'] == 0
+    assert node.host_clock.steps == pytest.approx(0.4, abs=0.002)
+    stop = ros.trajectories[count][1]
+    points = np.array([p.positions for p in stop.points])
+    assert np.abs(points[-1] - GOAL).max() > 0.05          # the path would have gone on
+    # from the arm's state then (read here a few ms later); with the node's time stepped
+    # along (a mutant) the stop began 1.78 rad (L1) away, ahead on the path
+    assert np.abs(points[0] - q_then).sum() < 0.3
+    time.sleep(1.5)
+    np.testing.assert_allclose(arm.q, points[-1], atol=0.01)
+
+
 def test_the_latched_markers_draw_the_map_as_it_is_from_start_up_to_a_reset(ros, tmp_path):
     # drawn only before a command: RViz showed nothing of a map loaded at start-up, and the
     # failures of a map cleared by ~/reset_map (or emptied by a finished run) stayed drawn

@@ -66,6 +66,7 @@ from probdis_ros.model.failure_map import (
 from probdis_ros.model.path_cost import DEFAULT_LENGTH_WEIGHT
 from probdis_ros.model.table import ROBOT_TABLE, Table
 from probdis_ros.motion.detector import DetectorSettings, MotionWatch
+from probdis_ros.motion.host_clock import HostClock
 from probdis_ros.motion.state_check import BadJointStateError, StateCheck, values_by_name
 from probdis_ros.planning import Disentangler, Method, RRTSettings, State
 from probdis_ros.planning.disentangle import (
@@ -382,6 +383,9 @@ class PlannerNode(Node):
         # with use_sim_time: the last /clock and the wall time it last advanced (best effort,
         # as rclpy's own: it matches every /clock publisher, and holds the newest alone)
         self.sim_clock, self.sim_clock_advanced = 0, -np.inf
+        # on wall time: the wall clock less its steps (an NTP step must not read as a late arm)
+        self.host_clock = HostClock()
+        self.host_steps_taken = 0       # the host clock's steps the joint states were told of
         self.clock_sub = self.create_subscription(
             ClockMsg, '/clock', self._on_clock,
             QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)) \
@@ -761,9 +765,9 @@ class PlannerNode(Node):
         then read as not executed), and before a state already taken (measured at its stamp)
         in the recording (a replay fed it to the command): so never before that state either.
         """
-        now = self.get_clock().now().nanoseconds * 1e-9
         if not self.use_sim_time:
-            return now
+            return self.host_clock.now()
+        now = self.get_clock().now().nanoseconds * 1e-9
         self._take_waiting_clock()
         now = max(now, self.sim_clock * 1e-9)
         if 0.0 < self.measured_at - now <= self.get_parameter('state_timeout').value:
@@ -786,12 +790,13 @@ class PlannerNode(Node):
         """
         Return when a message arrived [s], on the time base of the detector and the bag.
 
-        On wall-clock time the DDS receive time (independent of how busy the executor is);
-        with use_sim_time the node's clock, which the simulation's /clock drives.
+        On wall-clock time the DDS receive time (independent of how busy the executor is),
+        less the steps of this host's clock (:mod:`probdis_ros.motion.host_clock`); with
+        use_sim_time the node's clock, which the simulation's /clock drives.
         """
         received = info.get('received_timestamp')
         if received and not self.use_sim_time:
-            return received * 1e-9
+            return self.host_clock.receipt(received * 1e-9)
         return self._now()
 
     def _on_clock(self, msg: ClockMsg) -> None:
@@ -1234,8 +1239,31 @@ class PlannerNode(Node):
         elif setting.value is None:
             self.get_logger().warning(self._controller_unknown(desired))
 
+    def _host_clock_stepped(self) -> bool:
+        """
+        Tell whether this host's wall clock stepped since last asked; stop a run if it did.
+
+        The node's time goes on without the step (:mod:`probdis_ros.motion.host_clock`), which
+        is right for a driver on another computer.  A controller on this one runs on the same
+        clock and may jump along its command by the step, which nothing here models: the run
+        stops, decelerating from where the arm is, and learns nothing of the motion around it.
+        """
+        if self.use_sim_time:
+            return False
+        self.host_clock.now()
+        if self.host_clock.count == self.host_steps_taken:
+            return False
+        self.host_steps_taken = self.host_clock.count
+        step = f"this host's clock stepped {self.host_clock.last_step:+.3f} s"
+        self.get_logger().warning(f"{step} (an NTP step?): this node's time goes on without "
+                                  f'it; synchronise the clocks before a run')
+        if self.active:
+            self._guarded(self.run.stop, f'{step}; stopped (nothing learned of it)')
+        return True
+
     def _tick(self) -> None:
         self._note_stall()
+        self._host_clock_stepped()
         now = self._now()
         if self.recorder_close_at is not None and now >= self.recorder_close_at:
             self._close_bag()
@@ -1308,9 +1336,12 @@ class PlannerNode(Node):
 
         An executor kept from running resumes with a queue of states: each is judged at its
         own time, and a block seen in one is answered from the newest (``Run.on_joint_state``),
-        where the arm is by now.
+        where the arm is by now.  A batch taken after this host's clock stepped may hold
+        states received on either side of the step: they are dated as received now.
         """
         batch = [(data, info), *_waiting(self.states_sub)]
+        if self._host_clock_stepped():
+            batch = [(data, {**info, 'received_timestamp': 0}) for data, info in batch]
         for k, (data, info) in enumerate(batch):
             self._take_joint_state(data, info, newest=k == len(batch) - 1)
 
