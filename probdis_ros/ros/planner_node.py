@@ -385,7 +385,8 @@ class PlannerNode(Node):
         self.sim_clock, self.sim_clock_advanced = 0, -np.inf
         # on wall time: the wall clock less its steps (an NTP step must not read as a late arm)
         self.host_clock = HostClock()
-        self.host_steps_taken = 0       # the host clock's steps the joint states were told of
+        self.host_steps_answered = 0    # its steps said in the log (and a run stopped)
+        self.host_steps_dated = 0       # its steps before the joint states taken last
         self.clock_sub = self.create_subscription(
             ClockMsg, '/clock', self._on_clock,
             QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)) \
@@ -1239,9 +1240,9 @@ class PlannerNode(Node):
         elif setting.value is None:
             self.get_logger().warning(self._controller_unknown(desired))
 
-    def _host_clock_stepped(self) -> bool:
+    def _host_clock_stepped(self) -> None:
         """
-        Tell whether this host's wall clock stepped since last asked; stop a run if it did.
+        Say a step of this host's wall clock seen since the last one said; stop a run.
 
         The node's time goes on without the step (:mod:`probdis_ros.motion.host_clock`), which
         is right for a driver on another computer.  A controller on this one runs on the same
@@ -1249,17 +1250,16 @@ class PlannerNode(Node):
         stops, decelerating from where the arm is, and learns nothing of the motion around it.
         """
         if self.use_sim_time:
-            return False
+            return
         self.host_clock.now()
-        if self.host_clock.count == self.host_steps_taken:
-            return False
-        self.host_steps_taken = self.host_clock.count
+        if self.host_clock.count == self.host_steps_answered:
+            return
+        self.host_steps_answered = self.host_clock.count
         step = f"this host's clock stepped {self.host_clock.last_step:+.3f} s"
         self.get_logger().warning(f"{step} (an NTP step?): this node's time goes on without "
                                   f'it; synchronise the clocks before a run')
         if self.active:
             self._guarded(self.run.stop, f'{step}; stopped (nothing learned of it)')
-        return True
 
     def _tick(self) -> None:
         self._note_stall()
@@ -1340,7 +1340,9 @@ class PlannerNode(Node):
         states received on either side of the step: they are dated as received now.
         """
         batch = [(data, info), *_waiting(self.states_sub)]
-        if self._host_clock_stepped():
+        self._host_clock_stepped()
+        if self.host_clock.count != self.host_steps_dated:     # seen here or elsewhere
+            self.host_steps_dated = self.host_clock.count
             batch = [(data, {**info, 'received_timestamp': 0}) for data, info in batch]
         for k, (data, info) in enumerate(batch):
             self._take_joint_state(data, info, newest=k == len(batch) - 1)
