@@ -31,9 +31,11 @@ trajectory topic (other than this node's recorder), or while the arm moves with 
 of this node running, and a run stops when the controller goes; a second node of this name
 refuses to start.  With use_sim_time everything runs on the node's clock (/clock), and a
 start is refused, a run stopped, while /clock does not advance (``CLOCK_STALL`` of wall
-time: the tick runs on the wall clock).  The failure map is written atomically after every new
-failure and reloaded at start-up; a file that cannot be read is copied aside, one that cannot
-be written is an error in the status and diagnostics (the run goes on, the map in memory).
+time: the tick runs on the wall clock); on wall time the node's time is the wall clock less
+its steps (:mod:`probdis_ros.motion.host_clock`), and a step stops a run.  The failure map
+is written atomically after every new failure and reloaded at start-up; a file that cannot
+be read is copied aside, one that cannot be written is an error in the status and
+diagnostics (the run goes on, the map in memory).
 """
 
 from __future__ import annotations
