@@ -17,7 +17,7 @@
 from itertools import pairwise
 import time
 
-from probdis_ros.motion.host_clock import HOST_CLOCK_STEP, HostClock, READ_SLACK
+from probdis_ros.motion.host_clock import HOST_CLOCK_STEP, HostClock, READ_SLACK, SETTLE
 import pytest
 
 
@@ -80,11 +80,45 @@ def test_a_read_preempted_between_the_monotonic_reads_is_not_judged():
     clock.now()
     clocks.advance(0.2)
     clocks.gap = 0.2
-    assert clock.now() == pytest.approx(clocks.steady + clocks.offset)
+    assert abs(clock.now() - (clocks.steady + clocks.offset)) <= 0.1 + 1e-9
     clocks.gap = 0.5 * READ_SLACK
     clocks.advance(0.01)
     clock.now()
     assert clock.count == 0
+
+
+def test_a_step_made_during_a_preempted_read_leaves_the_time_as_the_monotonic_clock_runs():
+    # the read that could not be judged must not give the stepped wall clock either: the
+    # next judged read would take the step out again, and the time would run back by it
+    clocks = FakeClocks()
+    clock = HostClock(clocks.read)
+    t0 = clock.now()
+    clocks.advance(0.01)
+    clocks.offset += 0.4
+    clocks.gap = 0.01
+    t1 = clock.now()
+    assert abs(t1 - t0 - 0.01) <= 0.5 * clocks.gap + 1e-9 and clock.count == 0
+    clocks.gap = 0.0
+    clocks.advance(0.01)
+    assert clock.now() - t0 == pytest.approx(0.02) and clock.count == 1
+
+
+def test_a_receipt_read_soon_after_a_step_is_dated_as_taken():
+    # a message received just before a step 0.4 s ahead and taken just after it carries a
+    # receipt on the old clock: moved by the step it would date 0.4 s early
+    clocks = FakeClocks()
+    clock = HostClock(clocks.read)
+    clock.now()
+    received = clocks.steady + clocks.offset
+    clocks.advance(0.005)
+    clocks.offset += 0.4
+    taken = clock.now()
+    assert clock.receipt(received) == pytest.approx(taken, abs=1e-9)
+    # later, receipts are on the stepped clock, and moved by the step
+    clocks.advance(SETTLE + 0.01)
+    received = clocks.steady + clocks.offset
+    clocks.advance(0.002)
+    assert clock.receipt(received) == pytest.approx(clock.now() - 0.002)
 
 
 def test_this_hosts_clocks_read_as_one_time_without_steps():

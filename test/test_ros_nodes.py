@@ -711,7 +711,7 @@ def test_a_step_of_this_hosts_clock_stops_the_run_from_where_the_arm_is(ros, tmp
     wait_for(lambda: ros.call('start').success, 20, 'start')
     wait_for(lambda: ros.status.get('state') == 'executing', 20, 'motion')
     time.sleep(0.3)
-    count = len(ros.trajectories)
+    count, streams = len(ros.trajectories), node.state_check.streams
     read = node.host_clock.read
 
     def stepped():
@@ -721,9 +721,14 @@ def test_a_step_of_this_hosts_clock_stops_the_run_from_where_the_arm_is(ros, tmp
     node.host_clock.read = stepped
     wait_for(lambda: ros.status.get('state') == 'stopped', 2, 'the stop')
     q_then = np.array(arm.q)
+    restart = ros.call('start')          # refused for a second after the step
     assert "this host's clock stepped +0.400 s" in ros.status['message']
     assert ros.status['failures'] == 0
     assert node.host_clock.steps == pytest.approx(0.4, abs=0.002)
+    # the joint states begin a new stream (a driver on this computer stamps by the
+    # stepped clock)
+    assert node.state_check.streams > streams
+    assert not restart.success and 'stepped +0.400 s' in restart.message
     stop = ros.trajectories[count][1]
     points = np.array([p.positions for p in stop.points])
     assert np.abs(points[-1] - GOAL).max() > 0.05          # the path would have gone on
@@ -732,6 +737,10 @@ def test_a_step_of_this_hosts_clock_stops_the_run_from_where_the_arm_is(ros, tmp
     assert np.abs(points[0] - q_then).sum() < 0.3
     time.sleep(1.5)
     np.testing.assert_allclose(arm.q, points[-1], atol=0.01)
+    # a receipt read on the stepped clock is moved onto the node's time
+    received = round((time.time() + 0.4) * 1e9)
+    assert node._receive_time({'received_timestamp': received}) == \
+        pytest.approx(time.time(), abs=0.05)
 
 
 def test_the_latched_markers_draw_the_map_as_it_is_from_start_up_to_a_reset(ros, tmp_path):

@@ -106,6 +106,24 @@ def test_a_forward_step_of_the_hosts_clock_is_refused_and_the_stream_starts_afre
     assert check.refused == 1 and check.streams == 3
 
 
+def test_a_stream_begun_anew_takes_stamps_stepped_back_with_this_hosts_clock():
+    # a driver on this computer stamps its states by a clock that stepped 0.3 s back, while
+    # the planner's time goes on without the step: without a new stream its states were
+    # refused as older than the last for 0.3 s, then dated 0.3 s early for minutes
+    kept, restarted = gate(), gate()
+    for check in (kept, restarted):
+        for k in range(100):
+            check.check(10.0005 + 0.01 * k, NAMES, Q, stamp=10.0 + 0.01 * k)
+    restarted.restart(11.0, "this host's clock stepped -0.300 s: a new stream")
+    assert 'stepped -0.300 s' in restarted.refused_within(11.5, 1.0)
+    with pytest.raises(BadJointStateError, match='older than the last'):
+        kept.check(11.0105, NAMES, Q, stamp=10.71)
+    for k in range(1, 50):
+        restarted.check(11.0005 + 0.01 * k, NAMES, Q, stamp=10.7 + 0.01 * k)
+    assert restarted.measured_at(11.4905, 11.19) == pytest.approx(11.4905)
+    assert restarted.refused == 1
+
+
 def test_noise_of_0_005_rad_at_1_khz_is_never_refused():
     check = gate()
     rng = np.random.default_rng(0)

@@ -27,14 +27,18 @@ The monotonic clock never steps and runs at the wall clock's rate (NTP slews bot
 so the wall clock less the monotonic clock changes only when the wall clock steps.  The
 node's time is the wall clock less the sum of the steps seen (:meth:`HostClock.now`), and a
 receipt is moved by the same sum (:meth:`HostClock.receipt`): one time base that goes on
-through a step as if none had been made.  A message received before a step but handed to
-the node after it was seen carries a receipt on the old clock; the node dates those by
-:meth:`HostClock.now` instead, and stops a run at a step (``PlannerNode._host_clock_stepped``).
+through a step as if none had been made (with a driver on another computer; one on this
+computer stamps its states by the stepped clock, and the node begins their stream anew).  A
+message received before a step but taken after it was seen carries a receipt on the old
+clock: receipts read within ``SETTLE`` of a step are dated as taken.  The node stops a run
+at a step (``PlannerNode._host_clock_stepped``).  Its time then stays off the wall clock by
+the steps seen, for the life of the process (the bags' timestamps too).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
+import math
 import threading
 import time
 
@@ -44,6 +48,9 @@ HOST_CLOCK_STEP = 0.005
 #: [s] Two monotonic reads around the wall clock's further apart than this (the thread was
 #: preempted between them) leave the difference unjudged.
 READ_SLACK = 0.001
+#: [s] A receipt read within this of a step seen may be on either side of it (the message
+#: waited in a queue meanwhile): it is dated as taken.
+SETTLE = 0.5
 
 
 def read_clocks() -> tuple[float, float, float]:
@@ -62,22 +69,35 @@ class HostClock:
         self.steps = 0.0          # the sum of the steps seen [s]
         self.count = 0            # how many
         self.last_step = 0.0      # the latest [s]: ahead > 0, back < 0
+        self.stepped_at = -math.inf         # when it was seen, on this time base [s]
         self._offset: float | None = None   # the wall clock less the monotonic clock
-        self._lock = threading.Lock()       # the node's threads read it too: one step, once
+        self._lock = threading.Lock()       # cheap, and any thread may read the time
 
     def now(self) -> float:
         """Return the wall clock's time less the steps seen, noting a new one [s]."""
         with self._lock:
             before, wall, after = self.read()
-            if after - before <= READ_SLACK:
-                offset = wall - 0.5 * (before + after)
-                if self._offset is not None and abs(offset - self._offset) > self.threshold:
-                    self.last_step = offset - self._offset
-                    self.steps += self.last_step
-                    self.count += 1
-                self._offset = offset
+            steady = 0.5 * (before + after)
+            if after - before > READ_SLACK:     # unjudged: the monotonic clock tells the time
+                return wall - self.steps if self._offset is None else \
+                    steady + self._offset - self.steps
+            offset = wall - steady
+            if self._offset is not None and abs(offset - self._offset) > self.threshold:
+                self.last_step = offset - self._offset
+                self.steps += self.last_step
+                self.count += 1
+                self.stepped_at = wall - self.steps
+            self._offset = offset
             return wall - self.steps
 
     def receipt(self, wall: float) -> float:
-        """Return a wall-clock time read after the latest step seen, on :meth:`now`'s base [s]."""
+        """
+        Return when a message was received, read from the wall clock at ``wall`` [s].
+
+        On :meth:`now`'s base; within SETTLE after a step seen, when the message may have been
+        received before it, the time it is taken (now).
+        """
+        now = self.now()
+        if now - self.stepped_at <= SETTLE:
+            return now
         return wall - self.steps

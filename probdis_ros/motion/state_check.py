@@ -266,6 +266,17 @@ class StateCheck:
         """Return the reason of a refusal in the last span seconds before now, else ''."""
         return self.refusal if now - self.refused_at <= span else ''
 
+    def restart(self, now: float, reason: str) -> None:
+        """
+        Judge the states from now on as a new stream, for a reason noted as a refusal.
+
+        After a step of this host's clock: a driver on this computer stamps its states by the
+        stepped clock, and the stream's quickest delivery, its last stamp and the dates built
+        on them belong to the old one.
+        """
+        self.refuse(now, reason)
+        self._new_stream(now)
+
     def _new_stream(self, now: float) -> None:
         """Judge the states from now on as a new stream (stamps, jumps, deliveries)."""
         self.last_q, self.last_stamp, self.last_time = None, 0.0, now

@@ -388,7 +388,6 @@ class PlannerNode(Node):
         # on wall time: the wall clock less its steps (an NTP step must not read as a late arm)
         self.host_clock = HostClock()
         self.host_steps_answered = 0    # its steps said in the log (and a run stopped)
-        self.host_steps_dated = 0       # its steps before the joint states taken last
         self.clock_sub = self.create_subscription(
             ClockMsg, '/clock', self._on_clock,
             QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)) \
@@ -833,6 +832,7 @@ class PlannerNode(Node):
     def _start(self) -> tuple[bool, str]:
         if self.active:
             return False, 'a run is already active; call ~/stop first'
+        self._host_clock_stepped()
         clock = self._clock_problem()
         if clock:
             return False, clock
@@ -1091,6 +1091,7 @@ class PlannerNode(Node):
         if run is None:
             response.success, response.message = False, 'no path awaits confirmation'
             return response
+        self._host_clock_stepped()
         answers: list[str] = []
         self._guarded(lambda now: answers.append(getattr(run, answer)(now)), self._now())
         response.success = answers == ['']          # '' : done; else why not
@@ -1148,9 +1149,13 @@ class PlannerNode(Node):
                     "this node's clock, which JTC's must agree with (synchronise the two "
                     'clocks)', once=True)
             elif abs(offset) > CLOCK_OFFSET_SAID:
+                stepped = ''
+                if self.host_clock.count:    # the same clock, off by what this node left out
+                    stepped = (f" (this host's clock stepped {self.host_clock.steps:+.3f} s "
+                               f"since this node started; this node's time goes on without it)")
                 self.get_logger().warning(
                     f"the arm's clock reads {-offset:+.3f} s from this node's (by its joint "
-                    f"states' stamps): stamped commands are moved onto the arm's clock "
+                    f"states' stamps){stepped}: stamped commands are moved onto the arm's clock "
                     f'(synchronise the two clocks)', once=True)
             command = replace(command, stamp=command.stamp - offset)
         return trajectory_msg(command, self.joint_names, self.arm.lower, self.arm.upper)
@@ -1244,22 +1249,25 @@ class PlannerNode(Node):
 
     def _host_clock_stepped(self) -> None:
         """
-        Say a step of this host's wall clock seen since the last one said; stop a run.
+        Answer a step of this host's wall clock seen since the last one answered.
 
         The node's time goes on without the step (:mod:`probdis_ros.motion.host_clock`), which
-        is right for a driver on another computer.  A controller on this one runs on the same
-        clock and may jump along its command by the step, which nothing here models: the run
-        stops, decelerating from where the arm is, and learns nothing of the motion around it.
+        is right for a driver on another computer.  One on this computer stamps its states by
+        the stepped clock, and its controller may jump along its command by the step, which
+        nothing here models: the joint states begin a new stream (their offset learnt anew),
+        noted as a refusal (commands go unstamped for REFUSAL_HOLD, a start waits as long),
+        and a run stops, decelerating from where the arm is, learning nothing of the step.
         """
         if self.use_sim_time:
             return
-        self.host_clock.now()
+        now = self.host_clock.now()
         if self.host_clock.count == self.host_steps_answered:
             return
         self.host_steps_answered = self.host_clock.count
         step = f"this host's clock stepped {self.host_clock.last_step:+.3f} s"
         self.get_logger().warning(f"{step} (an NTP step?): this node's time goes on without "
                                   f'it; synchronise the clocks before a run')
+        self.state_check.restart(now, f'{step}: a new stream')
         if self.active:
             self._guarded(self.run.stop, f'{step}; stopped (nothing learned of it)')
 
@@ -1338,14 +1346,10 @@ class PlannerNode(Node):
 
         An executor kept from running resumes with a queue of states: each is judged at its
         own time, and a block seen in one is answered from the newest (``Run.on_joint_state``),
-        where the arm is by now.  A batch taken after this host's clock stepped may hold
-        states received on either side of the step: they are dated as received now.
+        where the arm is by now.
         """
         batch = [(data, info), *_waiting(self.states_sub)]
         self._host_clock_stepped()
-        if self.host_clock.count != self.host_steps_dated:     # seen here or elsewhere
-            self.host_steps_dated = self.host_clock.count
-            batch = [(data, {**info, 'received_timestamp': 0}) for data, info in batch]
         for k, (data, info) in enumerate(batch):
             self._take_joint_state(data, info, newest=k == len(batch) - 1)
 
