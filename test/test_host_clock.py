@@ -17,7 +17,7 @@
 from itertools import pairwise
 import time
 
-from probdis_ros.motion.host_clock import HOST_CLOCK_STEP, HostClock, READ_SLACK, SETTLE
+from probdis_ros.motion.host_clock import HOST_CLOCK_STEP, HostClock, READ_SLACK
 import pytest
 
 
@@ -103,22 +103,17 @@ def test_a_step_made_during_a_preempted_read_leaves_the_time_as_the_monotonic_cl
     assert clock.now() - t0 == pytest.approx(0.02) and clock.count == 1
 
 
-def test_a_receipt_read_soon_after_a_step_is_dated_as_taken():
-    # a message received just before a step 0.4 s ahead and taken just after it carries a
-    # receipt on the old clock: moved by the step it would date 0.4 s early
+def test_a_receipt_takes_out_a_step_made_since_the_clock_was_last_read():
+    # a joint state received on the stepped clock, its receipt read before anything else
+    # read the time: moved by the step all the same
     clocks = FakeClocks()
     clock = HostClock(clocks.read)
-    clock.now()
-    received = clocks.steady + clocks.offset
-    clocks.advance(0.005)
+    t0 = clock.now()
+    clocks.advance(0.01)
     clocks.offset += 0.4
-    taken = clock.now()
-    assert clock.receipt(received) == pytest.approx(taken, abs=1e-9)
-    # later, receipts are on the stepped clock, and moved by the step
-    clocks.advance(SETTLE + 0.01)
-    received = clocks.steady + clocks.offset
-    clocks.advance(0.002)
-    assert clock.receipt(received) == pytest.approx(clock.now() - 0.002)
+    received = clocks.steady + clocks.offset - 0.002
+    assert clock.receipt(received) == pytest.approx(t0 + 0.008)
+    assert clock.count == 1
 
 
 def test_this_hosts_clocks_read_as_one_time_without_steps():

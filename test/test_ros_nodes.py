@@ -408,8 +408,8 @@ def test_joint_states_waiting_behind_one_are_taken_with_it_oldest_first(ros, tmp
     node = planner(ros, tmp_path)
     taken, held, go = [], threading.Event(), threading.Event()
     take = node._take_joint_state
-    node._take_joint_state = lambda data, info, newest: (taken.append(newest),
-                                                         take(data, info, newest))
+    node._take_joint_state = lambda data, info, newest, **rest: (
+        taken.append(newest), take(data, info, newest, **rest))
 
     def hold_the_executor():
         held.set()
@@ -712,12 +712,16 @@ def test_a_step_of_this_hosts_clock_stops_the_run_from_where_the_arm_is(ros, tmp
     wait_for(lambda: ros.status.get('state') == 'executing', 20, 'motion')
     time.sleep(0.3)
     count, streams = len(ros.trajectories), node.state_check.streams
-    read = node.host_clock.read
+    refused = node.state_check.refused
+    read, receipt = node.host_clock.read, node.host_clock.receipt
 
     def stepped():
         before, wall, after = read()
         return before, wall + 0.4, after
 
+    # DDS's receipts step with the wall clock (a driver on another computer: its stamps
+    # do not); set first, so that no state is taken between the two on the old clock
+    node.host_clock.receipt = lambda wall: receipt(wall + 0.4)
     node.host_clock.read = stepped
     wait_for(lambda: ros.status.get('state') == 'stopped', 2, 'the stop')
     q_then = np.array(arm.q)
@@ -732,15 +736,14 @@ def test_a_step_of_this_hosts_clock_stops_the_run_from_where_the_arm_is(ros, tmp
     stop = ros.trajectories[count][1]
     points = np.array([p.positions for p in stop.points])
     assert np.abs(points[-1] - GOAL).max() > 0.05          # the path would have gone on
-    # from the arm's state then (read here a few ms later); with the node's time stepped
-    # along (a mutant) the stop began 1.78 rad (L1) away, ahead on the path
+    # from the arm's state then (read here a few ms later); with the node's time and the
+    # receipts stepped along (a mutant) the stop began 1.77 rad (L1) away, ahead on the path
     assert np.abs(points[0] - q_then).sum() < 0.3
     time.sleep(1.5)
     np.testing.assert_allclose(arm.q, points[-1], atol=0.01)
-    # a receipt read on the stepped clock is moved onto the node's time
-    received = round((time.time() + 0.4) * 1e9)
-    assert node._receive_time({'received_timestamp': received}) == \
-        pytest.approx(time.time(), abs=0.05)
+    # the states taken since, on the node's time, were all good: only the step was noted
+    assert node.state_check.refused == refused + 1
+    assert node.measured_at == pytest.approx(node._now(), abs=0.1)
 
 
 def test_the_latched_markers_draw_the_map_as_it_is_from_start_up_to_a_reset(ros, tmp_path):

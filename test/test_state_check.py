@@ -124,6 +124,24 @@ def test_a_stream_begun_anew_takes_stamps_stepped_back_with_this_hosts_clock():
     assert restarted.refused == 1
 
 
+@pytest.mark.parametrize('step', [-0.3, 0.8])
+def test_states_stamped_before_the_step_that_began_a_stream_do_not_hold_it(step):
+    # a driver on this computer, 1 kHz: the step is seen while ten states stamped before
+    # it still wait in the queue; they begin the new stream, and the states stamped after
+    # the step were then refused (0.3 s back: as older than the last, for 0.3 s; 0.8 s
+    # ahead, beyond ``late``: as stamped ahead of the stream)
+    check = StateCheck(NAMES, ARM.lower, ARM.upper, ARM.velocity_limits, late=0.5)
+    for k in range(100):
+        check.check(10.0005 + 0.001 * k, NAMES, Q, stamp=10.0 + 0.001 * k)
+    check.restart(10.1, "this host's clock stepped: a new stream")
+    for k in range(100, 110):                        # taken after the restart
+        check.check(10.1005 + 0.0001 * (k - 99), NAMES, Q, stamp=10.0 + 0.001 * k)
+    for k in range(110, 700):
+        check.check(10.0005 + 0.001 * k, NAMES, Q, stamp=10.0 + step + 0.001 * k)
+    assert check.refused == 1
+    assert check.measured_at(10.6995, 10.699 + step) == pytest.approx(10.6995)
+
+
 def test_noise_of_0_005_rad_at_1_khz_is_never_refused():
     check = gate()
     rng = np.random.default_rng(0)

@@ -30,15 +30,14 @@ receipt is moved by the same sum (:meth:`HostClock.receipt`): one time base that
 through a step as if none had been made (with a driver on another computer; one on this
 computer stamps its states by the stepped clock, and the node begins their stream anew).  A
 message received before a step but taken after it was seen carries a receipt on the old
-clock: receipts read within ``SETTLE`` of a step are dated as taken.  The node stops a run
-at a step (``PlannerNode._host_clock_stepped``).  Its time then stays off the wall clock by
-the steps seen, for the life of the process (the bags' timestamps too).
+clock: the node dates the joint states of such a batch as taken.  It stops a run at a step
+(``PlannerNode._host_clock_stepped``).  Its time then stays off the wall clock by the steps
+seen, for the life of the process (the bags' timestamps too).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-import math
 import threading
 import time
 
@@ -48,9 +47,6 @@ HOST_CLOCK_STEP = 0.005
 #: [s] Two monotonic reads around the wall clock's further apart than this (the thread was
 #: preempted between them) leave the difference unjudged.
 READ_SLACK = 0.001
-#: [s] A receipt read within this of a step seen may be on either side of it (the message
-#: waited in a queue meanwhile): it is dated as taken.
-SETTLE = 0.5
 
 
 def read_clocks() -> tuple[float, float, float]:
@@ -69,7 +65,6 @@ class HostClock:
         self.steps = 0.0          # the sum of the steps seen [s]
         self.count = 0            # how many
         self.last_step = 0.0      # the latest [s]: ahead > 0, back < 0
-        self.stepped_at = -math.inf         # when it was seen, on this time base [s]
         self._offset: float | None = None   # the wall clock less the monotonic clock
         self._lock = threading.Lock()       # cheap, and any thread may read the time
 
@@ -86,7 +81,6 @@ class HostClock:
                 self.last_step = offset - self._offset
                 self.steps += self.last_step
                 self.count += 1
-                self.stepped_at = wall - self.steps
             self._offset = offset
             return wall - self.steps
 
@@ -94,10 +88,9 @@ class HostClock:
         """
         Return when a message was received, read from the wall clock at ``wall`` [s].
 
-        On :meth:`now`'s base; within SETTLE after a step seen, when the message may have been
-        received before it, the time it is taken (now).
+        On :meth:`now`'s base, the clock read first so that a step made since is taken out;
+        a receipt read before a step and taken after it was seen is off by the step (the
+        node dates the joint states of such a batch as taken).
         """
-        now = self.now()
-        if now - self.stepped_at <= SETTLE:
-            return now
+        self.now()
         return wall - self.steps

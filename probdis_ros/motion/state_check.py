@@ -80,6 +80,10 @@ CLOCK_DRIFT = 1e-3
 DRIFT_SPAN = 1.0
 #: ... when that lies above it by more than this (rounding of stamps and receive times) [s].
 DRIFT_NOISE = 1e-4
+#: [s] A stream begun anew (:meth:`StateCheck.restart`) begins again, instead of refusing,
+#: at a break in its stamps this soon: states stamped before a step of the clock that
+#: stamps them, waiting in a queue, began it.
+RESTART_SPAN = 0.5
 
 
 class BadJointStateError(ValueError):
@@ -150,6 +154,7 @@ class StateCheck:
         self.refusal = ''                # its reason
         self.refused = 0
         self.streams = 0                 # streams heard: a restarted driver starts a new one
+        self.restarted_at = -np.inf      # host time of the last restart
 
     def check(self, now: float, names: Sequence[str], positions: Sequence[float],
               velocities: Sequence[float] = (), stamp: float = 0.0, sequence: int = 0,
@@ -272,10 +277,13 @@ class StateCheck:
 
         After a step of this host's clock: a driver on this computer stamps its states by the
         stepped clock, and the stream's quickest delivery, its last stamp and the dates built
-        on them belong to the old one.
+        on them belong to the old one.  States stamped before the step may still wait in a
+        queue and begin the new stream: a break in the stamps within RESTART_SPAN (back, or
+        ahead of the receipts by more than ``late``) begins it again.
         """
         self.refuse(now, reason)
         self._new_stream(now)
+        self.restarted_at = now
 
     def _new_stream(self, now: float) -> None:
         """Judge the states from now on as a new stream (stamps, jumps, deliveries)."""
@@ -316,6 +324,11 @@ class StateCheck:
                     f'arrived {silent:.3f} s after the joint state before it but '
                     f"stamped {stamps:.3f} s after it: this host's clock jumped, or this "
                     f'process was held up (the states after it start a new stream)')
+        if self.last_stamp > 0 < stamp and now - self.restarted_at <= RESTART_SPAN:
+            ahead = (stamp - self.last_stamp) - (now - self.last_time)
+            if stamp <= self.last_stamp or ahead > (self.late if self.late is not None
+                                                    else 0.5 * self.silence):
+                self._new_stream(now)    # the states before were stamped before the step
         if self.last_stamp > 0:
             if stamp <= 0:
                 raise BadJointStateError('unstamped after stamped joint states: a second '

@@ -388,6 +388,7 @@ class PlannerNode(Node):
         # on wall time: the wall clock less its steps (an NTP step must not read as a late arm)
         self.host_clock = HostClock()
         self.host_steps_answered = 0    # its steps said in the log (and a run stopped)
+        self.host_steps_dated = 0       # its steps before the last batch of joint states
         self.clock_sub = self.create_subscription(
             ClockMsg, '/clock', self._on_clock,
             QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)) \
@@ -1057,6 +1058,7 @@ class PlannerNode(Node):
         Without a run (or after one), only from a fresh joint state: the arm may have been
         moved since, and a stop built from an old one would pull it back there.
         """
+        self._host_clock_stepped()
         if self.active:
             self._guarded(self.run.stop, 'stopped on request')
             response.success, response.message = True, 'stopped; decelerating to rest'
@@ -1346,26 +1348,35 @@ class PlannerNode(Node):
 
         An executor kept from running resumes with a queue of states: each is judged at its
         own time, and a block seen in one is answered from the newest (``Run.on_joint_state``),
-        where the arm is by now.
+        where the arm is by now.  The first batch after a step of this host's clock may hold
+        states received on either side of it: they are dated as taken, at a time read before
+        the queue is emptied, so that no later state is dated before them.
         """
-        batch = [(data, info), *_waiting(self.states_sub)]
         self._host_clock_stepped()
+        taken = self._now()
+        batch = [(data, info), *_waiting(self.states_sub)]
+        across = self.host_clock.count != self.host_steps_dated
+        self.host_steps_dated = self.host_clock.count
         for k, (data, info) in enumerate(batch):
-            self._take_joint_state(data, info, newest=k == len(batch) - 1)
+            self._take_joint_state(data, info, newest=k == len(batch) - 1,
+                                   taken=taken if across else None)
 
-    def _take_joint_state(self, data: bytes, info: dict, newest: bool) -> None:
+    def _take_joint_state(self, data: bytes, info: dict, newest: bool,
+                          taken: float | None = None) -> None:
+        """Take one joint state; received at ``taken`` if given, else by its receipt."""
         try:
             msg = deserialize_message(data, JointState)
         except Exception as err:   # undecodable bytes must not stop the node
             self._record(self._record_topics[0][0], data, info)
-            now = self._receive_time(info)
+            now = self._receive_time(info) if taken is None else taken
             self.state_check.refuse(now, f'undecodable: {err}')
             self._refused(f'undecodable: {err}')
             return
         stamp = stamp_seconds(msg)
         # on simulated time the stamp is the sample's time; the node's clock may already
         # have moved on when a busy executor gets to the message
-        received = stamp if self.use_sim_time and stamp > 0 else self._receive_time(info)
+        received = stamp if self.use_sim_time and stamp > 0 else \
+            self._receive_time(info) if taken is None else taken
         try:
             q, v = self.state_check.check(
                 received, msg.name, msg.position, msg.velocity, stamp,
@@ -1456,8 +1467,10 @@ class PlannerNode(Node):
         """
         if not self.active:
             return
-        self.get_logger().warning(f'{reason}: stopping the run')
-        self._guarded(self.run.stop, reason)
+        self._host_clock_stepped()          # a step seen now stops it, its stop unstamped
+        if self.active:
+            self.get_logger().warning(f'{reason}: stopping the run')
+            self._guarded(self.run.stop, reason)
         if not self.traj_pub.wait_for_all_acked(Duration(seconds=HALT_WAIT)):
             self.get_logger().error(f'the stop was not acknowledged within {HALT_WAIT} s')
 
