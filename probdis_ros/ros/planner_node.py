@@ -1058,9 +1058,11 @@ class PlannerNode(Node):
         Without a run (or after one), only from a fresh joint state: the arm may have been
         moved since, and a stop built from an old one would pull it back there.
         """
-        self._host_clock_stepped()
-        if self.active:
-            self._guarded(self.run.stop, 'stopped on request')
+        was_active = self.active
+        self._host_clock_stepped()          # a step seen now stops the run itself
+        if was_active:
+            if self.active:
+                self._guarded(self.run.stop, 'stopped on request')
             response.success, response.message = True, 'stopped; decelerating to rest'
             return response
         fresh = self._now() - self.measured_at <= self.get_parameter('state_timeout').value
