@@ -943,7 +943,12 @@ def test_a_fault_inside_the_run_stops_the_arm_and_the_node_lives_on(ros, tmp_pat
     steady_states(ros)
     wait_for(lambda: ros.call('start').success, 10, 'start')
 
+    on_joint_state, faults = node.run.on_joint_state, []
+
     def broken(*args):          # after a failure was learned: it is kept all the same
+        if faults:              # one fault (the next states reach the stopped run as ever;
+            return on_joint_state(*args)     # a fault at each added a failure at each)
+        faults.append(args)
         run = node.run
         run.loop.learn(START, np.eye(7)[0])
         run.actions.append(Learned({'t': 0.0, 'x': run.loop.fmap.points[-1].tolist()}))
