@@ -35,9 +35,14 @@ class FakeClocks:
         return self.steady - self.gap, self.steady + self.offset, self.steady
 
 
-def test_without_a_step_the_time_is_the_wall_clock():
+def fake_clock() -> tuple[FakeClocks, HostClock]:
+    """Return fake clocks and a HostClock that reads them."""
     clocks = FakeClocks()
-    clock = HostClock(clocks.read)
+    return clocks, HostClock(clocks.read)
+
+
+def test_without_a_step_the_time_is_the_wall_clock():
+    clocks, clock = fake_clock()
     for _ in range(100):
         clocks.advance(0.01)
         clocks.offset += 1e-6          # an NTP slew of 100 ppm would show as nothing at all
@@ -48,8 +53,7 @@ def test_without_a_step_the_time_is_the_wall_clock():
 @pytest.mark.parametrize('step', [0.4, -0.3, 2.0 * HOST_CLOCK_STEP, 3600.0])
 def test_a_step_of_the_wall_clock_is_taken_out_of_the_time_and_the_receipts(step):
     # before the step and after it the time runs on as the monotonic clock does
-    clocks = FakeClocks()
-    clock = HostClock(clocks.read)
+    clocks, clock = fake_clock()
     t0 = clock.now()
     clocks.advance(0.01)
     clocks.offset += step
@@ -63,8 +67,7 @@ def test_a_step_of_the_wall_clock_is_taken_out_of_the_time_and_the_receipts(step
 
 
 def test_a_step_below_the_threshold_is_rounding_not_a_step():
-    clocks = FakeClocks()
-    clock = HostClock(clocks.read)
+    clocks, clock = fake_clock()
     clock.now()
     clocks.offset += 0.5 * HOST_CLOCK_STEP
     clocks.advance(0.01)
@@ -75,8 +78,7 @@ def test_a_step_below_the_threshold_is_rounding_not_a_step():
 def test_a_read_preempted_between_the_monotonic_reads_is_not_judged():
     # the thread held 0.2 s between reading the monotonic clock and the wall clock: the
     # wall clock then seems 0.1 s ahead of the monotonic clock's middle, no step was made
-    clocks = FakeClocks()
-    clock = HostClock(clocks.read)
+    clocks, clock = fake_clock()
     clock.now()
     clocks.advance(0.2)
     clocks.gap = 0.2
@@ -90,8 +92,7 @@ def test_a_read_preempted_between_the_monotonic_reads_is_not_judged():
 def test_a_step_made_during_a_preempted_read_leaves_the_time_as_the_monotonic_clock_runs():
     # the read that could not be judged must not give the stepped wall clock either: the
     # next judged read would take the step out again, and the time would run back by it
-    clocks = FakeClocks()
-    clock = HostClock(clocks.read)
+    clocks, clock = fake_clock()
     t0 = clock.now()
     clocks.advance(0.01)
     clocks.offset += 0.4
@@ -106,8 +107,7 @@ def test_a_step_made_during_a_preempted_read_leaves_the_time_as_the_monotonic_cl
 def test_a_receipt_takes_out_a_step_made_since_the_clock_was_last_read():
     # a joint state received on the stepped clock, its receipt read before anything else
     # read the time: moved by the step all the same
-    clocks = FakeClocks()
-    clock = HostClock(clocks.read)
+    clocks, clock = fake_clock()
     t0 = clock.now()
     clocks.advance(0.01)
     clocks.offset += 0.4

@@ -1355,13 +1355,12 @@ class PlannerNode(Node):
         the queue is emptied, so that no later state is dated before them.
         """
         self._host_clock_stepped()
-        taken = self._now()
-        batch = [(data, info), *_waiting(self.states_sub)]
         across = self.host_clock.count != self.host_steps_dated
         self.host_steps_dated = self.host_clock.count
+        taken = self._now() if across else None
+        batch = [(data, info), *_waiting(self.states_sub)]
         for k, (data, info) in enumerate(batch):
-            self._take_joint_state(data, info, newest=k == len(batch) - 1,
-                                   taken=taken if across else None)
+            self._take_joint_state(data, info, newest=k == len(batch) - 1, taken=taken)
 
     def _take_joint_state(self, data: bytes, info: dict, newest: bool,
                           taken: float | None = None) -> None:
