@@ -867,8 +867,22 @@ def test_two_publishers_interleaving_are_refused_whatever_they_send():
     with pytest.raises(BadJointStateError, match='a second publisher'):
         check.check(0.015, NAMES, near, stamp=10.015, sequence=3)
     check.check(0.02, NAMES, Q0, stamp=10.02, sequence=502)
+    # one started with the arm's at the same rate repeats its numbers
+    with pytest.raises(BadJointStateError, match='a second publisher'):
+        check.check(0.025, NAMES, near, stamp=10.025, sequence=502)
+    check.check(0.03, NAMES, Q0, stamp=10.03, sequence=503)
     # a restarted driver, after a silence, is a new stream
     check.check(0.02 + 1.5, NAMES, Q0, stamp=11.6, sequence=1)
+
+
+def test_on_simulated_time_a_state_off_the_clock_either_way_is_refused():
+    check = gate(late=0.1)
+    check.check(10.0, NAMES, Q0, stamp=10.0, clock=10.0)
+    check.check(10.05, NAMES, Q0, stamp=10.01, clock=10.05)      # within late: taken
+    with pytest.raises(BadJointStateError, match='from the simulated clock'):
+        check.check(10.2, NAMES, Q0, stamp=10.02, clock=10.2)     # stale: 0.18 s behind
+    with pytest.raises(BadJointStateError, match='from the simulated clock'):
+        check.check(10.2, NAMES, Q0, stamp=10.5, clock=10.2)      # not on the clock's time
 
 
 def test_a_backlog_delivered_late_is_stale():
@@ -1023,3 +1037,61 @@ def test_a_run_refuses_a_velocity_scaling_at_which_the_arm_overshoots_its_limits
     assert RunSettings(velocity_scaling=MAX_VELOCITY_SCALING).velocity_scaling == 0.7
     with pytest.raises(ValueError, match='velocity_scaling must be in'):
         RunSettings(velocity_scaling=0.8)
+
+
+def stop_after_silence(age: float, blocked_at: float | None = None):
+    """
+    Return where the arm is and the stop a run sends ``age`` s after its last joint state.
+
+    The arm follows the first path ``motion_delay`` behind (held from ``blocked_at`` on)
+    and goes on so while no state reaches the run.
+    """
+    loop = Disentangler(ARM, Planner(), Q1, max_paths=5, seed=0, goal_tolerance=0.04)
+    clock = [0.0]
+    settings = RunSettings(velocity_scaling=0.7)
+    run = Run(ARM, loop, settings, clock=lambda: clock[0])
+    run.start(0.0, Q0)
+    run.on_plan(loop.next_path(Q0))
+    jtc, delay = run.trajectory, settings.detection.motion_delay
+    t = 0.0
+    while t < 0.5 * jtc.duration and run.detector is not None:
+        t += 0.01
+        clock[0] = t
+        q, v, _ = jtc.sample((t if blocked_at is None else min(t, blocked_at)) - delay)
+        if blocked_at is not None and t > blocked_at:
+            v = 0 * v
+        run.on_joint_state(t, q, v)
+    assert run.active
+    arm = q if blocked_at is None else jtc.sample(blocked_at - delay)[0]
+    if blocked_at is None:
+        arm = jtc.sample(t + age - delay)[0]
+    clock[0] = t + age
+    run.actions.clear()
+    run.stop()
+    return arm, [a.command for a in run.actions if isinstance(a, Send)][-1]
+
+
+@pytest.mark.parametrize('age, blocked_at, within', [
+    (0.01, None, 1e-3),       # a free arm moves on as its command says: started from 10 mm back
+    (0.2, 0.3, 0.01),         # a held arm stays: started 0.21 rad into what holds it
+])
+def test_a_stop_made_after_the_last_joint_state_starts_where_the_arm_is_by_then(
+        age, blocked_at, within):
+    arm, stop_command = stop_after_silence(age, blocked_at)
+    assert np.abs(stop_command.positions[0] - arm).max() < within
+
+
+def test_a_stop_of_an_arm_just_short_of_a_limit_commands_nothing_past_it():
+    # extrapolated from a state 3 mrad short of A1's upper limit at 1 rad/s, 15 ms on
+    loop = Disentangler(ARM, Planner(), Q1, max_paths=5, seed=0, goal_tolerance=0.04)
+    clock = [0.0]
+    run = Run(ARM, loop, RunSettings(velocity_scaling=0.7), clock=lambda: clock[0])
+    q, v = Q0.copy(), np.zeros(7)
+    q[0], v[0] = ARM.upper[0] - 0.003, 1.0
+    run.start(0.0, q, v)
+    run.on_joint_state(0.0, q, v)
+    clock[0] = 0.015
+    run.actions.clear()
+    run.stop()
+    command = [a.command for a in run.actions if isinstance(a, Send)][-1]
+    assert ARM.within_limits(command.positions).all()

@@ -33,6 +33,7 @@ import numpy as np
 from probdis_ros.model import iiwa_arm
 from probdis_ros.motion.jtc import interpolate, JtcTrajectory
 from probdis_ros.motion.profiles import (
+    from_state,
     MAX_STOP_OVERLOAD,
     Motion,
     MotionLimits,
@@ -191,6 +192,19 @@ def test_the_edge_reached_is_the_one_the_arm_is_on_never_ahead_of_its_command():
 # ---------------------------------------------------------------- stops
 
 
+def test_a_path_from_an_arm_that_still_creeps_brakes_it_first():
+    # 2 mrad/s (L1) is motion: a path from it taken as from rest steps JTC's velocity;
+    # below 1 mrad/s the arm is at rest and the path starts at once
+    q = np.array([0.3, 0.2, 0.0, -1.1, 0.0, 0.6, 0.0])
+    path = np.array([q, q + 0.3])
+    for speed, brakes in ((2e-3, True), (5e-4, False)):
+        v = np.zeros(N)
+        v[1] = speed
+        motion = from_state(q, v, path)
+        np.testing.assert_array_equal(motion.velocities[0], v if brakes else np.zeros(N))
+        np.testing.assert_array_equal(motion.positions[0], q)
+
+
 def test_a_stop_at_rest_is_a_one_point_hold():
     q = np.array([0.1, 0.2, 0.3, -0.4, 0.5, 0.6, 0.7])
     command = stop(q, np.zeros(N), np.zeros(N)).command
@@ -216,33 +230,46 @@ def test_a_stop_from_full_speed_decelerates_for_the_analytic_time():
     assert np.abs(first - (q + v * H)).max() <= j * H ** 3 / 6 + 1e-12
 
 
-def test_a_stop_heading_into_a_limit_brakes_harder_and_stays_inside():
+@pytest.mark.parametrize('sign', [1.0, -1.0])
+def test_a_stop_heading_into_a_limit_brakes_harder_and_stays_inside(sign):
+    # toward the upper limit and toward the lower one: a stop that checked one side only ran
+    # JTC's quintic 1.9 mrad past the other
     limits = MotionLimits(velocity_scaling=1.0, acceleration_scaling=0.2)
+    limit = limits.upper[0] if sign > 0 else limits.lower[0]
     v = np.zeros(N)
-    v[0] = limits.max_velocity[0]
+    v[0] = sign * limits.max_velocity[0]
     q = np.zeros(N)
-    q[0] = limits.upper[0] - 0.2    # at 2 rad/s² it needs 0.6 rad, at 10 rad/s² 0.18
+    q[0] = limit - sign * 0.2    # at 2 rad/s² it needs 0.6 rad, at 10 rad/s² 0.18
     motion = stop(q, v, np.zeros(N), limits)
     assert 1.0 < motion.overload <= MAX_STOP_OVERLOAD / limits.acceleration_scaling
+    assert limits.lower[0] <= motion.positions[:, 0].min()
     assert motion.positions[:, 0].max() <= limits.upper[0]
-    q[0] = limits.upper[0] - 1e-4    # no braking can do this: clipped at the limit
+    trajectory = JtcTrajectory(motion.command, q, v)
+    reached = [trajectory.sample(t)[0][0] for t in np.arange(0.0, trajectory.duration + 0.02,
+                                                             1e-3)]
+    assert limits.lower[0] <= min(reached) and max(reached) <= limits.upper[0]
+    q[0] = limit - sign * 1e-4    # no braking can do this: clipped at the limit
     clipped = stop(q, v, np.zeros(N), limits)
-    assert clipped.overload == np.inf and clipped.positions[:, 0].max() <= limits.upper[0]
+    assert clipped.overload == np.inf
+    assert limits.lower[0] <= clipped.positions[:, 0].min()
+    assert clipped.positions[:, 0].max() <= limits.upper[0]
 
 
+@pytest.mark.parametrize('sign', [1.0, -1.0])
 @pytest.mark.parametrize('gap', [0.002, 0.005])
-def test_a_stop_that_cannot_brake_before_a_limit_holds_there_as_jtc_runs_it(gap):
+def test_a_stop_that_cannot_brake_before_a_limit_holds_there_as_jtc_runs_it(gap, sign):
     # positions clipped at the limit with the profile's speeds left on: JTC's quintic ran
     # 4e-4 rad past the limit between the points, at 160 rad/s^2
     limits = MotionLimits(velocity_scaling=0.2)
+    limit = limits.upper[0] if sign > 0 else limits.lower[0]
     v = np.zeros(N)
-    v[0] = limits.max_velocity[0]
+    v[0] = sign * limits.max_velocity[0]
     q = np.array([0.0, 0.5, 0.0, -1.0, 0.0, 0.5, 0.0])
-    q[0] = limits.upper[0] - gap
+    q[0] = limit - sign * gap
     motion = stop(q, v, np.zeros(N), limits)
     assert motion.overload == np.inf
     trajectory = JtcTrajectory(motion.command, q, v)
-    past = max(trajectory.sample(t)[0][0] - limits.upper[0]
+    past = max(sign * (trajectory.sample(t)[0][0] - limit)
                for t in np.arange(0.0, trajectory.duration + 0.02, 1e-4))
     assert past <= 1e-12
 
