@@ -435,6 +435,26 @@ def test_a_path_that_begins_with_a_release_places_a_block_on_its_own_edges():
     assert [motion.segment_at(t) for t in (0.0, motion.via_times[1] + 0.01)] == [0, 1]
 
 
+def test_a_release_continues_the_pressed_command_as_it_moves_and_accelerates():
+    # desired start: JTC runs on from its last command, here still speeding up past the arm
+    # (a retreat pressed in as it began); the release must start at that velocity and
+    # acceleration, or JTC's acceleration steps
+    loop = Disentangler(ARM, Planner(), Q1, max_paths=5, seed=0, goal_tolerance=0.04)
+    run = Run(ARM, loop, RunSettings(jtc_start='desired'), clock=lambda: 0.0)
+    pressed = Q0 + np.array([0.2, 0.1, 0.0, 0.08, 0.0, 0.0, 0.0])
+    onward = from_state(pressed, None, np.array([pressed, pressed + 0.3]),
+                        SETTINGS.limits(ARM))
+    last = JtcTrajectory(onward.command, pressed, np.zeros(7), -0.1)
+    q0, v0, a0 = last.sample(0.1)
+    assert np.abs(a0).min() > 0.1 and np.abs(v0).min() > 0.001    # moving, speeding up
+    run.start(0.0, Q0, None, last)           # sent at -0.1 s
+    run.pressed = True
+    motion = run._motion(np.array([Q0, Q1]), 0.0)
+    assert motion.positions[0] == pytest.approx(q0)
+    assert motion.velocities[0] == pytest.approx(v0)
+    assert motion.accelerations[0] == pytest.approx(a0)
+
+
 def test_a_path_the_arm_never_follows_stops_the_run_and_learns_nothing():
     run = run_from()
     run.on_plan(run.loop.next_path(Q0))

@@ -23,6 +23,7 @@ from probdis_ros.motion.detector import (
     DetectorSettings,
     external_torque,
     ExternalTorqueObserver,
+    RETREAT_START_WAIT,
     Verdict,
 )
 from probdis_ros.motion.gravity import GravityModel
@@ -153,6 +154,30 @@ def test_an_arm_that_never_moves_is_held_if_its_torques_rise_and_unrun_if_not(ef
             break
     assert found is verdict, detector.reason
     assert ('held where it stood' in detector.reason) == (verdict is Verdict.BLOCKED)
+
+
+@pytest.mark.parametrize('efforts, before', [('held', 0.4), ('idle', None)])
+def test_a_retreat_held_from_its_start_is_blocked_as_soon_as_its_torque_rises(efforts, before):
+    # a retreat waits up to RETREAT_START_WAIT for a controller that takes it late; one held
+    # where it stands, its spring pulling toward the command, presses on meanwhile: blocked
+    # once the rise shows, not at the end of the wait
+    gravity = GravityModel()
+    times = np.linspace(0.0, 1.0, 11)
+    pull = np.outer(times, [0, 0.4, 0, 0, 0, 0, 0])
+    command = JtcTrajectory(TrajectoryCommand(times, HELD + pull), HELD, np.zeros(7))
+    detector = BlockDetector(command, 0.0, DetectorSettings(), expect_motion=False)
+    found = Verdict.MOVING
+    for t in np.arange(0.01, 3.0, 0.01):
+        spring = 200.0 * (command.sample(t - detector.settings.motion_delay)[0] - HELD)
+        effort = gravity(HELD) + (spring if efforts == 'held' else 3.0)
+        found = detector.update(t, HELD, external_torque(detector.settings, HELD, effort))
+        if found is not Verdict.MOVING:
+            break
+    assert found is Verdict.BLOCKED, detector.reason        # waited for, in the end
+    if before is not None:
+        assert t < before, detector.reason
+    else:       # the torque as it was: waited for nearly all of RETREAT_START_WAIT
+        assert t > 0.9 * RETREAT_START_WAIT
 
 
 @pytest.mark.parametrize('spring, noise, verdict', [

@@ -201,6 +201,9 @@ def test_the_joint_limiter_ramps_a_step_at_the_velocity_limit_and_keeps_the_limi
     for _ in range(100):
         last = limiter(np.array([0.5, 3.0]))
     assert last == pytest.approx([0.5, 1.0])       # arrived, and held at the upper limit
+    for _ in range(200):
+        last = limiter(np.array([-3.0, -3.0]))
+    assert last == pytest.approx([-1.0, -1.0])     # and at the lower ones
 
 
 def test_a_desired_start_continues_the_last_command_where_a_measured_start_steps_back():

@@ -40,7 +40,10 @@ ARM = iiwa_arm()
 def test_a_block_is_located_where_it_began_and_its_force_is_bounded(scene):
     block = measure.straight_block(scene, 0.2)
     assert block.verdict == 'blocked'
-    assert block.onset_error_m < 0.02               # the flange where contact happened
+    # the flange where contact happened: 1.1 mm (demo_hook) and 3.3 mm (robot_bunny) off;
+    # an onset taken where the gap crossed its threshold, not where it began to rise, was
+    # 12.2 and 8.3 mm off
+    assert block.onset_error_m < 0.006
     assert block.flange_moved_m > block.onset_error_m
     assert block.force_at_detection_n < 150.0       # a ceiling, not the trajectory's end
     assert block.detected_s < block.planned_s
