@@ -1082,9 +1082,7 @@ def stop_after_silence(age: float, blocked_at: float | None = None):
             v = 0 * v
         run.on_joint_state(t, q, v)
     assert run.active
-    arm = q if blocked_at is None else jtc.sample(blocked_at - delay)[0]
-    if blocked_at is None:
-        arm = jtc.sample(t + age - delay)[0]
+    arm = jtc.sample((t + age if blocked_at is None else blocked_at) - delay)[0]
     clock[0] = t + age
     run.actions.clear()
     run.stop()
@@ -1092,7 +1090,7 @@ def stop_after_silence(age: float, blocked_at: float | None = None):
 
 
 @pytest.mark.parametrize('age, blocked_at, within', [
-    (0.01, None, 1e-3),       # a free arm moves on as its command says: started from 10 mm back
+    (0.01, None, 1e-3),       # a free arm moves on as its command says: started 0.010 rad back
     (0.2, 0.3, 0.01),         # a held arm stays: started 0.21 rad into what holds it
 ])
 def test_a_stop_made_after_the_last_joint_state_starts_where_the_arm_is_by_then(
