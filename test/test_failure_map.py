@@ -15,6 +15,7 @@
 """The failure probability model P(FAIL | c, F) and failure map files."""
 
 import json
+import math
 
 import numpy as np
 from probdis_ros.model import FailureMap, FailureMapError, TaskPoints, TaskSpace
@@ -122,8 +123,12 @@ def test_bad_failures_are_refused():
         fmap.add([0, 0, 0], [1, 0, 0])
     with pytest.raises(FailureMapError, match='needs q'):
         FailureMap(TaskSpace.POSE3).add([0, 0, 0], [1, 0, 0])
-    with pytest.raises(FailureMapError, match='c_fail'):
-        FailureMap(TaskSpace.POINT2, c_fail=-1)
+    for c_fail in (-1, 0.0, math.inf, math.nan):      # inf: 0 everywhere but at a failure
+        with pytest.raises(FailureMapError, match='c_fail'):
+            FailureMap(TaskSpace.POINT2, c_fail=c_fail)
+    for q in ([1.0, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0, 0.0]):
+        with pytest.raises(FailureMapError):
+            FailureMap(TaskSpace.POSE3).add([0, 0, 0], [1, 0, 0], q)
     assert len(fmap) == 0
 
 
@@ -172,6 +177,10 @@ def test_corrupt_entries_never_give_a_half_loaded_map(tmp_path):
         FailureMap.load(path)
     for bad, message in [({'format': 'other'}, 'not a probdis-failure-map'),
                          ({**doc, 'version': 99}, 'unsupported version'),
+                         ({**doc, 'version': 0}, 'unsupported version'),
+                         ({k: v for k, v in doc.items() if k != 'version'},
+                          'unsupported version'),
+                         ({**doc, 'c_fail': True}, 'c_fail must be a number'),
                          ({**doc, 'task_space': 'point7'}, 'unknown task_space'),
                          ({**doc, 'failures': {}}, 'must be a list'),
                          # a float overflowed (an OverflowError escaped and ended the node)

@@ -66,6 +66,19 @@ def test_a_step_of_the_wall_clock_is_taken_out_of_the_time_and_the_receipts(step
     assert clock.now() - t1 == pytest.approx(0.01) and clock.count == 1
 
 
+def test_steps_add_up():
+    # a second step (ahead 0.4 s, then back 0.1 s): the time runs on without both
+    clocks, clock = fake_clock()
+    t0 = clock.now()
+    for step in (0.4, -0.1):
+        clocks.advance(0.01)
+        clocks.offset += step
+        clock.now()
+    clocks.advance(0.01)
+    assert clock.now() - t0 == pytest.approx(0.03)
+    assert clock.count == 2 and clock.steps == pytest.approx(0.3)
+
+
 def test_a_step_below_the_threshold_is_rounding_not_a_step():
     clocks, clock = fake_clock()
     clock.now()

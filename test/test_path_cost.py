@@ -21,6 +21,7 @@ from probdis_ros.model import arm_for_setting, FailureMap, TaskSpace
 from probdis_ros.model.path_cost import (
     edge_cost,
     edge_points,
+    EdgeTerms,
     path_cost,
     path_length,
     path_success_probability,
@@ -102,6 +103,16 @@ def test_path_through_a_failure_point_has_near_zero_success(iiwa):
     away[:, 0] += 2.0
     assert path_success_probability(iiwa, fmap, away, DELTA) > \
         path_success_probability(iiwa, fmap, path, DELTA)
+
+
+def test_a_capped_edge_may_leave_a_region_above_the_cap_but_never_go_deeper():
+    # Hard: an edge that starts above the cap (the arm where it was blocked) may go on
+    # while the probability falls, through points still above the cap; any rise is refused
+    terms = EdgeTerms(cap=0.1)
+    assert terms.allows([0.8, 0.6, 0.3, 0.05], start=0.9)
+    assert not terms.allows([0.8, 0.85], start=0.9)
+    assert not terms.allows([0.05, 0.2])                  # entering from below the cap
+    assert terms.allows([0.1, 0.1])                       # at the cap is within it
 
 
 def test_the_compiled_arccos_is_within_one_ulp_of_libm():

@@ -172,6 +172,49 @@ def test_the_loop_stops_after_n_iter_paths():
     assert loop.next_path(current) is None
 
 
+class NoPlanner:
+    def plan(self, start, goal, fmap, rng):
+        return None
+
+
+def test_the_last_path_gives_up_however_it_ends_and_empty_plans_count():
+    # N_ITER counts every path, an empty plan too: never one more
+    loop = Disentangler(PLANAR, NoPlanner(), GOAL, max_paths=4)
+    assert loop.next_path(START) is None
+    assert loop.paths_tried == 4 and loop.state is State.GAVE_UP
+    # the last path ran to its end short of the goal, or was blocked and retreated
+    loop = straight_loop(max_paths=1)
+    loop.next_path(START)
+    loop.report_completed(START)
+    assert loop.state is State.GAVE_UP
+    loop = straight_loop(max_paths=1)
+    loop.next_path(START)
+    loop.report_retreated(loop.report_blocked(START, 0)[-1])
+    assert loop.state is State.GAVE_UP
+    with pytest.raises(ValueError):
+        Disentangler(PLANAR, NoPlanner(), GOAL, max_paths=0)
+
+
+def test_a_retreat_goes_back_the_way_the_arm_came_through_earlier_paths_via_points():
+    # a path that ran to its end short of the goal, through a via point; then two blocks:
+    # each retreat retraces the arm's own way, and what a retreat retraced leaves the route
+    step = np.array([0.05, 0, 0, 0, 0, 0, 0])
+    loop = straight_loop(min_retreat=0.12)
+    a, b = START - step, START - 2 * step
+    loop.next_path(START)
+    loop.attempts[-1].path = np.array([START, a, b])
+    loop.report_completed(b)
+    loop.next_path(b)
+    blocked = b - 0.5 * step
+    retreat = loop.report_blocked(blocked, 0)
+    np.testing.assert_array_equal(retreat, [blocked, b, a, START])     # through a
+    loop.report_retreated(START)
+    loop.next_path(START)
+    blocked = START - 0.5 * step
+    retreat = loop.report_blocked(blocked, 0)
+    np.testing.assert_array_equal(retreat, [blocked, START])           # not back to a or b
+
+
 def test_success_when_a_path_reaches_the_goal_and_stop_ends_the_run():
     loop = straight_loop()
     path = loop.next_path(START)

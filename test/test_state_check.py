@@ -21,6 +21,7 @@ from probdis_ros.model import iiwa_arm
 from probdis_ros.motion.state_check import (
     BadJointStateError,
     LIMIT_TOLERANCE,
+    RESTART_SPAN,
     SILENCE,
     StateCheck,
 )
@@ -140,6 +141,27 @@ def test_states_stamped_before_the_step_that_began_a_stream_do_not_hold_it(step)
         check.check(10.0005 + 0.001 * k, NAMES, Q, stamp=10.0 + step + 0.001 * k)
     assert check.refused == 1
     assert check.measured_at(10.6995, 10.699 + step) == pytest.approx(10.6995)
+
+
+def test_a_break_in_the_stamps_begins_the_stream_again_for_as_long_as_restart_span():
+    # queued states stamped before the step may come in for a while (a busy executor): a
+    # break 0.3 s after the restart still begins the stream again; after RESTART_SPAN it is
+    # the arm's stream misbehaving
+    for after, refused in ((0.3, 1), (RESTART_SPAN + 0.1, 2)):
+        check = StateCheck(NAMES, ARM.lower, ARM.upper, ARM.velocity_limits, late=0.5)
+        for k in range(100):
+            check.check(10.0005 + 0.001 * k, NAMES, Q, stamp=10.0 + 0.001 * k)
+        check.restart(10.1, "this host's clock stepped -0.300 s: a new stream")
+        now = 10.1005
+        check.check(now, NAMES, Q, stamp=10.1)           # stamped before the step
+        while now < 10.1 + after:
+            now += 0.001
+            check.check(now, NAMES, Q, stamp=now - 0.0005 + 0.0001)
+        try:
+            check.check(now + 0.001, NAMES, Q, stamp=now - 0.3)     # by the stepped clock
+        except BadJointStateError:
+            pass
+        assert check.refused == refused
 
 
 def test_noise_of_0_005_rad_at_1_khz_is_never_refused():
