@@ -33,7 +33,7 @@ from probdis_ros.model.arms import TaskSpace
 from probdis_ros.ros.bag_source import Bag
 from probdis_ros.ros.messages import duration
 from probdis_ros.ros.mock_iiwa_node import MockIiwa
-from probdis_ros.ros.planner_node import CLOCK_STALL, PlannerNode
+from probdis_ros.ros.planner_node import CLOCK_STALL, DISCOVERY_WAIT, PlannerNode
 from probdis_ros.ros.recorder import FLUSH_INTERVAL
 import pytest
 import rclpy
@@ -1024,3 +1024,164 @@ def test_on_simulated_time_start_needs_a_running_clock_and_a_run_stops_with_it(r
     wait_for(lambda: finished(ros), CLOCK_STALL + 10, 'the run to stop')
     assert time.monotonic() - t0 > CLOCK_STALL - 0.5
     assert 'has not advanced' in ros.status['message'], ros.status
+
+
+# ------------------------------------------------------------------ a third mutation review
+
+
+def test_start_is_refused_once_the_joint_states_have_stopped_arriving(ros, tmp_path):
+    # an arm seen once, then silent (its driver gone): a run started from where it was
+    node = planner(ros, tmp_path, state_timeout=0.3)
+    stream = Stream(ros)
+    wait_for(lambda: node.measured is not None, 10, 'joint states')
+    stream.cancel()
+    time.sleep(0.5)
+    response = ros.call('start')
+    assert not response.success and 'no fresh joint state' in response.message, response
+    assert not ros.trajectories
+
+
+def test_an_undecodable_joint_state_refuses_start_for_a_while(ros, tmp_path):
+    node = planner(ros, tmp_path)
+    Stream(ros)
+    wait_for(lambda: node.measured is not None, 10, 'joint states')
+    ros.js_pub.publish(b'\x00\x01\x00\x00\xff\xff\xff\x7f')     # CDR cut short
+    wait_for(lambda: 'undecodable' in ' '.join(ros.status.get('errors', [])), 5,
+             'the refusal in the status')
+    response = ros.call('start')
+    assert not response.success and 'undecodable' in response.message, response
+    time.sleep(0.5)                      # held for a second (REFUSAL_HOLD): still
+    response = ros.call('start')
+    assert not response.success and 'undecodable' in response.message, response
+    wait_for(lambda: ros.call('start').success, 10, 'a start once the refusal is old')
+
+
+def test_a_start_right_after_a_stop_without_a_run_is_taken(ros, tmp_path):
+    # the stop is this node's own command: heard back on the trajectory topic, it is no
+    # other node's command (which would refuse ~/start for a second)
+    node = planner(ros, tmp_path)
+    Stream(ros)
+    wait_for(lambda: node.measured is not None, 10, 'joint states')
+    response = ros.call('stop')
+    assert response.success and 'decelerating' in response.message, response
+    wait_for(lambda: ros.trajectories, 5, 'the stop')
+    time.sleep(0.1)
+    response = ros.call('start')
+    assert response.success, response.message
+
+
+def test_a_start_moments_after_another_nodes_command_is_refused(ros, tmp_path):
+    # its publisher may be gone by then (ros2 topic pub --once): the command is remembered
+    node = planner(ros, tmp_path)
+    assert not ros.call('start').success          # (no joint states yet: the client ready)
+    Stream(ros)
+    wait_for(lambda: node.measured is not None, 10, 'joint states')
+    intruder = rclpy.create_node('intruder', context=ros.context)      # not spun
+    publisher = intruder.create_publisher(JointTrajectory, TRAJECTORY, 10)
+    wait_for(lambda: publisher.get_subscription_count() >= 2, 5, 'the planner to hear it')
+    hold = JointTrajectory(joint_names=JOINTS)
+    hold.points = [JointTrajectoryPoint(positions=START.tolist(), time_from_start=duration(0.1))]
+    publisher.publish(hold)
+    intruder.destroy_node()
+    wait_for(lambda: all(info.node_name != 'intruder'
+                         for info in ros.probe.get_publishers_info_by_topic(TRAJECTORY)),
+             2, 'the intruder gone from the graph')
+    response = ros.call('start')
+    assert not response.success and 'did not send' in response.message, response
+    wait_for(lambda: ros.call('start').success, 10, 'a start a second later')
+
+
+def test_on_simulated_time_a_clock_that_repeats_its_time_has_stopped(ros, tmp_path):
+    # a paused simulation may go on publishing /clock at the time it paused at
+    node = planner(ros, tmp_path, use_sim_time=True, state_timeout=0.5)
+    Stream(ros, stamped=False)
+    clock_pub = ros.probe.create_publisher(Clock, '/clock', 10)
+    ros.probe.create_timer(0.01, lambda: clock_pub.publish(Clock(clock=Time(sec=1000))))
+    wait_for(lambda: node.sim_clock, 5, 'the clock')
+    time.sleep(CLOCK_STALL + 0.3)
+    response = ros.call('start')
+    assert not response.success and 'has not advanced' in response.message, response
+
+
+def test_a_stopped_run_is_a_warning_in_the_diagnostics(ros, tmp_path):
+    planner(ros, tmp_path)
+    seen = diagnostics(ros)
+    Stream(ros)
+    wait_for(lambda: ros.call('start').success, 10, 'start')
+    assert ros.call('stop').success
+    wait_for(lambda: ros.status.get('state') == 'stopped', 5, 'the stop')
+    wait_for(lambda: any('stopped on request' in d.message for d in seen), 5, 'diagnostics')
+    assert all(d.level == DiagnosticStatus.WARN for d in seen
+               if 'stopped on request' in d.message), [(d.level, d.message) for d in seen]
+
+
+def test_a_run_stops_when_the_controller_goes_while_it_plans(ros, tmp_path):
+    # no command runs (the arm rests while the plan is made): only the graph tells
+    topic = '/nobody/joint_trajectory'
+    planner(ros, tmp_path, trajectory_topic=topic, plan_time=8.0)
+    Stream(ros)
+    controller = Controller(ros, topic)
+    try:
+        wait_for(lambda: ros.call('start').success, 10, 'a start with a controller')
+        wait_for(lambda: ros.status.get('state') == 'planning', 5, 'planning')
+    finally:
+        controller.close()
+    wait_for(lambda: finished(ros), 3, 'the run to stop')
+    assert ros.status['state'] == 'stopped' and 'controller is gone' in ros.status['message']
+
+
+def test_a_namesake_that_never_announces_itself_holds_start_only_while_the_planner_is_new(
+        ros, tmp_path):
+    # one killed with SIGKILL stays in the graph a while: a restarted planner must run
+    node = planner(ros, tmp_path)
+    Stream(ros)
+    ghost = rclpy.create_node('probdis_planner', context=ros.context)      # not spun
+    try:
+        wait_for(lambda: ros.probe.get_node_names().count('probdis_planner') > 1, 5,
+                 'the namesake in the graph')
+        time.sleep(max(0.0, node.started + DISCOVERY_WAIT - time.monotonic()))
+        wait_for(lambda: ros.call('start').success, 5, 'a start beside the silent namesake')
+    finally:
+        ghost.destroy_node()
+
+
+def test_a_younger_namesake_announcing_itself_leaves_the_running_planner_alone(ros, tmp_path):
+    # of two planners of one name the younger leaves: the older may be driving the arm
+    planner(ros, tmp_path)
+    Stream(ros)
+    latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    announce = ros.probe.create_publisher(String, '/probdis_planner/instance', latched)
+    announce.publish(String(data=json.dumps({'pid': 1, 'host': 'elsewhere',
+                                             'started_at': time.time() + 60.0})))
+    time.sleep(0.5)
+    wait_for(lambda: ros.call('start').success, 10, 'a start of the older planner')
+
+
+def test_a_refused_joint_state_is_in_the_bag(ros, tmp_path):
+    # a replay must see what the live planner refused, as it saw it
+    node = planner(ros, tmp_path)
+    stream = Stream(ros)
+    wait_for(lambda: ros.call('start').success, 10, 'start')
+    stream.cancel()
+    time.sleep(0.05)
+    ros.js_pub.publish(stream.message(outside(0, 3.0)))
+    wait_for(lambda: finished(ros), 5, 'the run to stop')
+    bag = Path(ros.status['bag'])
+    wait_for(lambda: node.recorder is None and (bag / 'metadata.yaml').exists(), 5, 'the bag')
+    with Bag(bag) as recorded:
+        positions = [recorded.deserialize(m).position[0]
+                     for m in recorded.messages(['/lbr/joint_states'])]
+    assert 3.0 in positions, positions
+
+
+def test_confirm_and_decline_answer_failure_while_no_path_awaits(ros, tmp_path):
+    # the operator (or the demo's prompt) must not read a path as sent when none was
+    planner(ros, tmp_path, confirm_paths=True, plan_time=5.0)
+    Stream(ros)
+    wait_for(lambda: ros.call('start').success, 10, 'start')
+    wait_for(lambda: ros.status.get('state') == 'planning', 5, 'planning')
+    for service in ('confirm_path', 'decline_path'):
+        answer = ros.call(service)
+        assert not answer.success, (service, answer.message)
+        assert 'no path awaits confirmation (the run is planning)' in answer.message
+    assert ros.call('stop').success

@@ -306,6 +306,30 @@ def test_a_joint_range_narrows_the_planner_and_refuses_goals_and_ranges_outside(
     assert not response.success and '(joint_lower, joint_upper)' in response.message
 
 
+def test_a_joint_margin_that_leaves_the_joint_range_no_room_is_refused_when_set(ros, tmp_path):
+    # accepted, it broke the planner ~/start builds (the error escaped the service)
+    node = planner(ros, tmp_path)
+    margin = node.get_parameter('joint_margin').value
+    # A1 from 0.1 rad inside its upper limit: room for the margin, but not for 0.2
+    lower = [float(node.arm.upper[0]) - 0.1] + [math.nan] * 6
+    assert node.set_parameters([Parameter('joint_lower', value=lower)])[0].successful
+    result = node.set_parameters([Parameter('joint_margin', value=0.2)])[0]
+    assert not result.successful and 'A1: joint_lower and joint_upper leave no room' in \
+        result.reason, result.reason
+    assert node.get_parameter('joint_margin').value == margin
+
+
+def test_every_parameter_start_up_built_on_is_refused_when_set_later(ros, tmp_path):
+    # taken, the node would say it uses them while it goes on with the old ones
+    node = planner(ros, tmp_path)
+    for name, value in (('joint_names', [f'iiwa_joint_{i}' for i in range(1, 8)]),
+                        ('joint_states_topic', '/elsewhere'), ('orientation', False),
+                        ('table', False), ('table_clearance', 0.2), ('object_radius', 0.1)):
+        result = node.set_parameters([Parameter(name, value=value)])[0]
+        assert not result.successful and 'fixed at start-up' in result.reason, name
+        assert node.get_parameter(name).value != value, name
+
+
 def test_the_method_parameter_takes_the_planners_informed_ideas_and_refuses_the_maps(
         ros, tmp_path):
     from probdis_ros.planning.probes import ProbeRRT
@@ -597,6 +621,19 @@ def test_a_finished_run_without_a_bag_keeps_its_map_beside_the_map_file(ros, tmp
     wait_for(lambda: list(tmp_path.glob('map.json.finished-*')), 5, 'the map kept aside')
     kept, = tmp_path.glob('map.json.finished-*')
     assert len(FailureMap.load(kept)) == 3
+    wait_for(lambda: len(FailureMap.load(tmp_path / 'map.json')) == 0, 5, 'the emptied map')
+
+
+def test_a_run_that_gave_up_keeps_its_map_aside_and_the_next_starts_empty(ros, tmp_path):
+    # the map of a run that gave up is the one most wanted; the next run starts afresh
+    planner(ros, tmp_path, bag_dir='', max_paths=1)
+    mock(ros)
+    wait_for(lambda: ros.call('start').success, 20, 'start')
+    wait_for(lambda: finished(ros), 60, 'the run to end')
+    assert ros.status['state'] == 'gave_up' and ros.status['failures'] >= 1, ros.status
+    wait_for(lambda: list(tmp_path.glob('map.json.finished-*')), 5, 'the map kept aside')
+    kept, = tmp_path.glob('map.json.finished-*')
+    assert len(FailureMap.load(kept)) == ros.status['failures']
     wait_for(lambda: len(FailureMap.load(tmp_path / 'map.json')) == 0, 5, 'the emptied map')
 
 
