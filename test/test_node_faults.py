@@ -1185,3 +1185,54 @@ def test_confirm_and_decline_answer_failure_while_no_path_awaits(ros, tmp_path):
         assert not answer.success, (service, answer.message)
         assert 'no path awaits confirmation (the run is planning)' in answer.message
     assert ros.call('stop').success
+
+
+def test_on_simulated_time_joint_states_stamped_on_the_wall_clock_are_refused(ros, tmp_path):
+    # a driver not on the simulation's time: its states are dated years from the run's
+    node = planner(ros, tmp_path, use_sim_time=True, state_timeout=0.5)
+    clock_pub = ros.probe.create_publisher(Clock, '/clock', 10)
+    sim = [1000.0]
+
+    def advance():
+        sim[0] += 0.01
+        clock_pub.publish(Clock(clock=Time(sec=int(sim[0]),
+                                           nanosec=int((sim[0] % 1) * 1e9))))
+    ros.probe.create_timer(0.01, advance)
+    wait_for(lambda: node.sim_clock, 5, 'the clock')
+    Stream(ros)                              # stamped by the probe's (wall) clock
+    wait_for(lambda: node.state_check.refused >= 3, 5, 'refused states')
+    response = ros.call('start')
+    assert not response.success and 'from the simulated clock' in response.message, response
+    assert node.measured is None and not ros.trajectories
+
+
+def test_a_state_timeout_set_between_runs_refuses_late_states_in_the_next(ros, tmp_path):
+    # as test_a_backlog_of_joint_states_delivered_late_stops_the_run, the timeout set later
+    node = planner(ros, tmp_path, state_timeout=2.0)
+    assert node.set_parameters([Parameter('state_timeout', value=0.3)])[0].successful
+    stream = Stream(ros)
+    wait_for(lambda: ros.call('start').success, 10, 'start')
+    stream.cancel()
+    began = ros.probe.get_clock().now().nanoseconds * 1e-9
+
+    def late():         # stamps that fall behind the clock: a queue drained too slowly
+        now = ros.probe.get_clock().now().nanoseconds * 1e-9
+        stamp = began + 0.2 * (now - began)
+        ros.js_pub.publish(stream.message(stamp=Time(sec=int(stamp),
+                                                     nanosec=int((stamp % 1) * 1e9))))
+    ros.probe.create_timer(0.01, late)
+    wait_for(lambda: finished(ros), 5, 'the run to stop')
+    wait_for(lambda: 'stale' in node.state_check.refusal, 1, 'the late states refused')
+
+
+def test_a_c_fail_set_between_runs_is_the_next_runs(ros, tmp_path):
+    # the map a run learns and writes is priced by the c_fail it started with
+    node = planner(ros, tmp_path)
+    Stream(ros)
+    assert node.set_parameters([Parameter('c_fail', value=50.0)])[0].successful
+    wait_for(lambda: ros.call('start').success, 10, 'start')
+    assert ros.call('stop').success
+    wait_for(lambda: finished(ros), 5, 'the stop')
+    assert ros.call('reset_map').success          # written now: the map as the run had it
+    wait_for(lambda: (tmp_path / 'map.json').exists(), 5, 'the map file')
+    assert FailureMap.load(tmp_path / 'map.json').c_fail == 50.0
