@@ -33,7 +33,7 @@ from probdis_ros.model.arms import TaskSpace
 from probdis_ros.ros.bag_source import Bag
 from probdis_ros.ros.messages import duration
 from probdis_ros.ros.mock_iiwa_node import MockIiwa
-from probdis_ros.ros.planner_node import CLOCK_STALL, DISCOVERY_WAIT, PlannerNode
+from probdis_ros.ros.planner_node import CLOCK_STALL, DISCOVERY_WAIT, HALT_WAIT, PlannerNode
 from probdis_ros.ros.recorder import FLUSH_INTERVAL
 import pytest
 import rclpy
@@ -1236,3 +1236,28 @@ def test_a_c_fail_set_between_runs_is_the_next_runs(ros, tmp_path):
     assert ros.call('reset_map').success          # written now: the map as the run had it
     wait_for(lambda: (tmp_path / 'map.json').exists(), 5, 'the map file')
     assert FailureMap.load(tmp_path / 'map.json').c_fail == 50.0
+
+
+def test_a_planner_killed_while_the_controller_cannot_take_the_stop_waits_and_says_so(
+        ros, tmp_path):
+    # a process that exits at once may take its unsent stop with it: it waits HALT_WAIT for
+    # every controller to acknowledge the stop, and names one that never did
+    arm = mock_process(ros, f'scenario:={free_scenario(tmp_path)}')
+    process = planner_process(ros, tmp_path, 'velocity_scaling:=0.3', stderr=subprocess.PIPE)
+    try:
+        wait_for(lambda: ros.call('start', timeout=60).success, 90, 'start')
+        wait_for(lambda: ros.status.get('state') == 'executing', 30, 'motion')
+        arm.send_signal(signal.SIGSTOP)          # the controller hangs: it acknowledges nothing
+        began = time.monotonic()
+        process.send_signal(signal.SIGINT)
+        _, err = process.communicate(timeout=30)
+        took = time.monotonic() - began
+    finally:
+        if process.poll() is None:
+            process.kill()
+        arm.send_signal(signal.SIGCONT)
+        arm.send_signal(signal.SIGINT)
+        arm.wait(10)
+    assert process.returncode == 0, err
+    assert f'the stop was not acknowledged within {HALT_WAIT} s' in err, err
+    assert took >= HALT_WAIT - 0.5, took
