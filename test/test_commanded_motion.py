@@ -860,16 +860,31 @@ def test_with_a_desired_start_a_stop_taken_very_late_is_still_taken(latency):
     assert np.abs(commands[-1] - commands[-2]).max() < 1e-9
 
 
-def test_an_arm_still_running_the_last_command_at_a_new_start_is_no_foreign_motion():
-    # the previous run's last command still takes the arm 0.3 rad (L1) on to its end
-    end = Q0 + np.array([0.3, 0, 0, 0, 0, 0, 0])
+@pytest.mark.parametrize('way, lag', [(0.3, 0.0), (0.6, 0.0), (0.6, 0.05)])
+def test_an_arm_still_running_the_last_command_at_a_new_start_is_no_foreign_motion(way, lag):
+    # the previous run's last command (its stop, say) still takes the arm on to its end:
+    # halfway along 0.6 rad (L1) it is 0.3 from where it started and from the end, twice
+    # what the rest check allows an arm at rest, and an arm in impedance lags its command
+    end = Q0 + np.array([way, 0, 0, 0, 0, 0, 0])
     running = trajectory(Q0, end)
     loop = Disentangler(ARM, Planner(), Q1, max_paths=5, seed=0, goal_tolerance=0.04)
     run = Run(ARM, loop, RunSettings(), clock=lambda: 0.0)
     run.start(0.0, Q0, running=running)
     for t in np.arange(0.01, running.duration + 0.5, 0.01):
-        run.on_joint_state(t, running.sample(t)[0])
+        run.on_joint_state(t, running.sample(t - lag)[0])
     assert run.active and run.phase.value == 'planning', run.message
+
+
+def test_an_arm_leaving_the_way_of_its_last_command_at_a_new_start_is_stopped():
+    # on that command's way at any lag is this planner's motion; off it, something else's
+    end = Q0 + np.array([0.6, 0, 0, 0, 0, 0, 0])
+    running = trajectory(Q0, end)
+    loop = Disentangler(ARM, Planner(), Q1, max_paths=5, seed=0, goal_tolerance=0.04)
+    run = Run(ARM, loop, RunSettings(), clock=lambda: 0.0)
+    run.start(0.0, Q0, running=running)
+    for t in np.arange(0.01, running.duration + 0.5, 0.01):
+        run.on_joint_state(t, running.sample(t)[0] + np.array([0, 0, 0.5 * t, 0, 0, 0, 0]))
+    assert not run.active and 'something other than this planner' in run.message
 
 
 # ------------------------------------------------------------------ what the gate refuses

@@ -663,6 +663,19 @@ def test_stop_during_motion_decelerates_to_rest_within_the_limits(ros, tmp_path)
     assert ros.status['state'] == 'stopped'
 
 
+def test_a_start_while_the_arm_still_brakes_from_a_stop_is_no_foreign_motion(ros, tmp_path):
+    # the stop this node sent is still slowing the arm down: its way to rest is the node's
+    # own motion, not something else driving the arm
+    planner(ros, tmp_path)
+    mock(ros, free_scenario(tmp_path))
+    stops = stop_while_moving(ros)
+    assert len(stops) == 1
+    response = ros.call('start')
+    assert response.success, response.message
+    time.sleep(1.0)
+    assert 'something other than this planner' not in ros.status.get('message', ''), ros.status
+
+
 def test_a_cartesian_speed_limit_caps_every_point_of_the_arm_in_what_is_sent(ros, tmp_path):
     from probdis_ros.model.table import ROBOT_TABLE
     from probdis_ros.motion.cartesian_speed import point_speeds
