@@ -17,6 +17,7 @@
 from dataclasses import asdict
 import itertools
 import json
+import math
 import os
 from pathlib import Path
 import signal
@@ -449,6 +450,50 @@ def test_the_comparison_with_the_paper_is_paired_by_world():
     assert [(r['family'], r['method'], r['difference']) for r in rows] == [
         ('open_box', 'epsilon:0.2', 0.5), ('open_box', 'hard:0.01', 0.0)]
     assert '| open_box | epsilon:0.2 | 20 |' in paired_markdown(summarise(family), True)
+
+
+def test_the_claims_take_a_tie_as_good_a_clear_win_by_the_lower_bound_and_no_variant():
+    # a tie with the best baseline is "at least as good"; "clearly" only where the lower end
+    # of probabilistic's interval is above the baseline's rate; probabilistic with another
+    # c_fail is the paper's method too, never its baseline
+    def cell(obstacles, method, success, ci=(0.0, 1.0)):
+        return {'setting': '2d', 'obstacles': obstacles, 'method': method,
+                'success': success, 'ci95': list(ci)}
+
+    summary = {'cells': [
+        cell(1, 'probabilistic', 0.7, (0.55, 0.85)), cell(1, 'hard:0.01', 0.7),
+        cell(10, 'probabilistic', 0.8, (0.65, 0.9)), cell(10, 'epsilon:0.2', 0.7),
+        cell(10, 'probabilistic:2.0', 0.95, (0.85, 1.0))]}
+    verdicts = claims(summary)
+    rows = {b['obstacles']: b for b in verdicts['beats_every_baseline']}
+    assert (rows[1]['best_baseline'], rows[1]['at_least_as_good'], rows[1]['clear']) == \
+        ('hard:0.01', True, False)
+    assert (rows[10]['best_baseline'], rows[10]['at_least_as_good'], rows[10]['clear']) == \
+        ('epsilon:0.2', True, False)
+    assert verdicts['all_at_least_as_good'] is True
+    assert claims_markdown(verdicts).count('| yes |') == 2
+
+
+def test_the_plan_time_per_path_is_the_median_over_the_cells_paths():
+    def record(world, times):
+        return {'setting': '2d', 'obstacles': 1, 'method': 'probabilistic', 'max_paths': 20,
+                'success': True, 'paths': len(times), 'plan_times_s': times, 'wall_s': 1.0,
+                'world': world, 'empty_plans': 0}
+
+    # one slow plan among five: the median is the typical path's, not the mean's 0.208
+    summary = summarise([record(0, [0.01, 0.01, 1.0]), record(1, [0.01, 0.01])])
+    assert summary['cells'][0]['plan_time_s_median'] == pytest.approx(0.01)
+    assert markdown_table(summary).splitlines()[-1].endswith('| 0.010 |')
+
+
+def test_the_bootstrap_interval_leaves_2_5_percent_out_at_each_end():
+    # 20 worlds solved of 40: a resample's successes are binomial, 40 draws at 0.5; the
+    # exact 2.5 % and 97.5 % quantiles are 14 and 26 of 40 (the 5 % one, 15)
+    cdf = np.cumsum([math.comb(40, k) for k in range(41)]) / 2 ** 40
+    low, high = int(np.searchsorted(cdf, 0.025)), int(np.searchsorted(cdf, 0.975))
+    assert (low, high) == (14, 26) and int(np.searchsorted(cdf, 0.05)) == 15
+    values = np.array([1.0] * 20 + [0.0] * 20)
+    assert bootstrap_ci(values, samples=20000) == pytest.approx((low / 40, high / 40))
 
 
 def report_record(world, method='probabilistic'):

@@ -103,6 +103,7 @@ NAN7 = [math.nan] * 7
     ([bad(4, 'velocities', [0.0] * 6 + [1e-7])], None),      # within a float's epsilon
     ([bad(2, 'positions', [3.0] * 7)], None),   # beyond the limits: JTC passes, the driver clamps
     ([bad(4, 'accelerations', [0.0] * 8)], 'point 4 has 8 accelerations for 7 joints'),
+    ([bad(1, 'positions', [])], 'point 1 has 0 positions for 7 joints'),   # none: refused
     ([bad(3, 'accelerations', [math.inf] * 7), bad(3, 'velocities', [0.0] * 2)],
      'point 3 has 2 velocities for 7 joints'),
 ])
@@ -143,4 +144,15 @@ def test_joints_are_taken_by_name_in_any_order_and_no_others():
             if len(getattr(point, name)):
                 setattr(point, name, [*getattr(point, name), 0.0])
     with pytest.raises(ValueError, match=r"names 8 joints for the controller's 7 \(gripper"):
+        command_from_msg(msg, JOINTS)
+
+
+def test_a_command_naming_a_joint_twice_is_refused():
+    # all the controller's joints and one of them again: JTC refuses it, as the planner must
+    msg = five_points()
+    msg.joint_names = [*JOINTS, 'lbr_A1']
+    for point in msg.points:
+        for name in ('positions', 'velocities', 'accelerations'):
+            setattr(point, name, [*getattr(point, name), 0.0])
+    with pytest.raises(ValueError, match=r"^trajectory names 8 joints for the controller's 7$"):
         command_from_msg(msg, JOINTS)

@@ -499,6 +499,116 @@ def test_replay_refuses_bad_bags_clearly(tmp_path):
         replay(tmp_path / 'nojs')
 
 
+def test_a_path_whose_first_point_lies_near_the_arm_is_a_path_not_a_hold(tmp_path):
+    # the planner's commands have a point every controller period, the first a hair from
+    # the arm: only a command that goes nowhere (one point at the arm) is a hold
+    arm = iiwa_arm()
+    near = WORLD.start + 0.01 * SHORT_MOVE
+    path = time_path(np.array([WORLD.start, near, WORLD.start + SHORT_MOVE]),
+                     arm.velocity_limits, 0.5)
+    messages = [(int(1e9), JS, js_message(JOINTS, WORLD.start, 1.0)),
+                (int(1.01e9), TRAJ, traj_message(path, JOINTS))]
+    for k in range(1, int((path.duration + 1.0) * RATE)):
+        t = 1.01 + k / RATE
+        q = path.at(max(k / RATE - DetectorSettings().motion_delay, 0.0))
+        messages.append((int(t * 1e9), JS, js_message(JOINTS, q, t)))
+    result = replay_of(tmp_path / 'bag', messages, {JS: JS_TYPE, TRAJ: TRAJ_TYPE})
+    assert result.paths == 1 and result.success and not result.blocks, result.problems
+
+
+def test_a_bag_of_holds_alone_is_no_run(tmp_path):
+    # a recording without statuses is one run only where it holds a path
+    hold = time_path(np.array([WORLD.start, WORLD.start]), iiwa_arm().velocity_limits, 0.5)
+    messages = [(int(1e9), JS, js_message(JOINTS, WORLD.start, 1.0)),
+                (int(1.01e9), TRAJ, traj_message(hold, JOINTS))]
+    messages += [(int((1.01 + k / RATE) * 1e9), JS,
+                  js_message(JOINTS, WORLD.start, 1.01 + k / RATE)) for k in range(1, 100)]
+    result = replay_of(tmp_path / 'bag', messages, {JS: JS_TYPE, TRAJ: TRAJ_TYPE})
+    assert (result.runs, result.paths, result.success, result.blocks) == (0, 0, False, [])
+
+
+def test_two_runs_told_by_the_planners_status_count_the_paths_of_both(tmp_path):
+    # the status starts a run at "planning" with no paths after "idle" or an outcome; the
+    # paths of the bag are the last word of every run, summed
+    status = '/probdis_planner/status'
+    first, _ = free_move(0.05)
+    second, _ = free_move(0.05, begin=first[-1][0] * 1e-9 + 0.01,
+                          start=WORLD.start + SHORT_MOVE, move=-SHORT_MOVE)
+
+    def said(ns, state, paths):
+        return (ns, status, {'data': json.dumps({'state': state, 'paths': paths})})
+    messages = first + second + [
+        said(first[0][0] - 3, 'idle', 0), said(first[0][0] - 2, 'planning', 0),
+        said(first[-1][0] - 1, 'succeeded', 1), said(first[-1][0] + 1, 'idle', 1),
+        said(second[0][0] - 1, 'planning', 0), said(second[-1][0] - 1, 'succeeded', 1)]
+    types = {JS: JS_TYPE, TRAJ: TRAJ_TYPE, status: 'std_msgs/msg/String'}
+    result = replay_of(tmp_path / 'bag', messages, types)
+    assert (result.runs, result.paths, result.success) == (2, 2, True), result.problems
+
+
+def test_a_path_after_a_blocked_retreat_is_a_path(tmp_path):
+    # only a blocked path is followed by a retreat; a retreat that is blocked too is
+    # followed by the next path, which counts, and ends the run disentangled here
+    messages, held, t_stop = simulated_run()
+    t_block = 1.0 + t_stop + 0.35
+    arm = iiwa_arm()
+    retreat = time_path(np.array([held, WORLD.start]), arm.velocity_limits, 0.5)
+    messages = [m for m in messages if m[0] <= t_block * 1e9]
+    messages.append((int(t_block * 1e9) + 1, TRAJ, traj_message(retreat, JOINTS)))
+    for k in range(1, int(1.5 * RATE)):             # the arm does not move back either
+        t = t_block + k / RATE
+        messages.append((int(t * 1e9), JS, js_message(JOINTS, held, t)))
+    t_path = t_block + 1.5
+    away = time_path(np.array([held, held - 0.2 * (WORLD.goal - WORLD.start)]),
+                     arm.velocity_limits, 0.5)
+    messages.append((int(t_path * 1e9) + 1, TRAJ, traj_message(away, JOINTS)))
+    delay = DetectorSettings().motion_delay
+    for k in range(1, int((away.duration + 1.0) * RATE)):
+        t = t_path + k / RATE
+        messages.append((int(t * 1e9), JS,
+                         js_message(JOINTS, away.at(max(k / RATE - delay, 0.0)), t)))
+    result = replay_of(tmp_path / 'bag', messages, {JS: JS_TYPE, TRAJ: TRAJ_TYPE})
+    assert [b.retreat for b in result.blocks] == [False, True]
+    assert result.paths == 2 and result.success, result.problems
+
+
+def test_the_gap_at_rest_told_is_the_largest_after_any_command(tmp_path):
+    # two free moves, resting 0.06 rad and then 0.02 rad off their commands: what d_dist
+    # must stay above is the larger, not the last
+    offset = np.array([0.03, 0.0, 0.03, 0.0, 0.0, 0.0, 0.0])
+    first, _ = free_move(0.05, rest=0.06)
+    second, _ = free_move(0.05, rest=0.02, begin=first[-1][0] * 1e-9 + 0.01,
+                          start=WORLD.start + SHORT_MOVE - offset, move=-SHORT_MOVE)
+    write_bag(tmp_path / 'two', first + second, *FORMATS[0])
+    result = replay(tmp_path / 'two', overrides={'motion_delay': 0.05})
+    assert result.paths == 2 and result.success and not result.blocks, result.problems
+    assert result.rest_gap == pytest.approx(0.06, abs=0.002)
+
+
+def test_the_peak_external_torque_is_the_runs_not_the_stops_after_it(tmp_path):
+    # the run gave up: the efforts of the states after (its stop, the arm handled) are
+    # plotted, but the peak told is the run's, as the live run's
+    messages, held, t_stop = simulated_run()
+    t_end = 1.0 + t_stop + 0.35
+    status = '/probdis_planner/status'
+    types = {JS: JS_TYPE, TRAJ: TRAJ_TYPE, status: 'std_msgs/msg/String'}
+    messages = [m for m in messages if m[0] <= t_end * 1e9]
+    messages.append((int(t_end * 1e9) + 1, status,
+                     {'data': json.dumps({'state': 'gave_up', 'paths': 1})}))
+    for k in range(1, 50):
+        t = t_end + k / RATE
+        messages.append((int(t * 1e9), JS, js_message(JOINTS, held, t)))
+
+    def with_efforts(after):
+        return [(ns, topic, dict(fields, effort=[after if ns > t_end * 1e9 else 1.0] * 7)
+                 if topic == JS else fields) for ns, topic, fields in messages]
+    calm = replay_of(tmp_path / 'calm', with_efforts(1.0), types)
+    pushed = replay_of(tmp_path / 'pushed', with_efforts(300.0), types)
+    assert calm.torque_peak is not None and len(pushed.torques) == len(calm.torques)
+    assert max(abs(e).max() for _, e in pushed.torques) > calm.torque_peak.max() + 100
+    np.testing.assert_array_equal(pushed.torque_peak, calm.torque_peak)
+
+
 @pytest.mark.ros
 @pytest.mark.parametrize('desired', [False, True])
 def test_replay_of_a_recorded_mock_run_finds_the_live_blocks(tmp_path, desired):
@@ -710,6 +820,23 @@ def test_a_bag_cut_midway_reports_what_came_before_the_damage(tmp_path):
         replay(tmp_path / 'arm.mcap')
     total = sum(1 for m in messages if m[1] == JS)
     assert 0 < len(err.value.partial.times) < total
+
+
+def test_a_damaged_bag_written_out_of_time_order_is_read_in_time_order(tmp_path):
+    # a recorder writes messages in the order it handles them, not always in that of their
+    # receive times; read record by record, they are replayed in time order (as rosbags
+    # reads a whole bag), not as states that went back in time and were refused
+    messages, stop, _ = simulated_run()
+    written = list(messages)
+    written[1], written[3] = written[3], written[1]
+    write_mcap_library_bag(tmp_path / 'arm.mcap', written)
+    data = (tmp_path / 'arm.mcap').read_bytes()
+    (tmp_path / 'arm.mcap').write_bytes(data[:-100])
+    result = replay(tmp_path / 'arm.mcap')
+    assert [p for p in result.problems if 'read record by record' not in p] == []
+    assert len(result.times) == sum(1 for m in messages if m[1] == JS)
+    assert len(result.blocks) == 1
+    np.testing.assert_allclose(result.blocks[0].config, stop, atol=1e-9)
 
 
 def test_a_truncated_sqlite_bag_is_a_one_line_error(tmp_path):
