@@ -465,12 +465,7 @@ def test_a_path_the_run_ended_on_as_done_is_done_though_the_status_came_a_state_
     arm = iiwa_arm()
     path = time_path(np.array([WORLD.start, WORLD.start + 0.1]), arm.velocity_limits, 0.5)
     status = '/probdis_planner/status'
-    messages = [(int(1e9), JS, js_message(JOINTS, WORLD.start, 1.0)),
-                (int(1.01e9), TRAJ, traj_message(path, JOINTS))]
-    for k in range(1, int((path.duration + 1.0) * RATE)):
-        t = 1.01 + k / RATE
-        q = path.at(max(k / RATE - DetectorSettings().motion_delay, 0.0))
-        messages.append((int(t * 1e9), JS, js_message(JOINTS, q, t)))
+    messages = followed(path)
     types = {JS: JS_TYPE, TRAJ: TRAJ_TYPE, status: 'std_msgs/msg/String'}
     done = replay_of(tmp_path / 'free', messages, types)
     assert done.success
@@ -478,6 +473,17 @@ def test_a_path_the_run_ended_on_as_done_is_done_though_the_status_came_a_state_
     messages.append((int(t_done * 1e9), status,
                      {'data': json.dumps({'state': 'succeeded', 'paths': 1})}))
     assert replay_of(tmp_path / 'ended', messages, types).success
+
+
+def followed(path) -> list:
+    """Return the messages of an arm at WORLD.start sent path at 1.01 s, motion_delay behind it."""
+    messages = [(int(1e9), JS, js_message(JOINTS, WORLD.start, 1.0)),
+                (int(1.01e9), TRAJ, traj_message(path, JOINTS))]
+    for k in range(1, int((path.duration + 1.0) * RATE)):
+        t = 1.01 + k / RATE
+        q = path.at(max(k / RATE - DetectorSettings().motion_delay, 0.0))
+        messages.append((int(t * 1e9), JS, js_message(JOINTS, q, t)))
+    return messages
 
 
 def replay_of(bag, messages, types):
@@ -506,12 +512,7 @@ def test_a_path_whose_first_point_lies_near_the_arm_is_a_path_not_a_hold(tmp_pat
     near = WORLD.start + 0.01 * SHORT_MOVE
     path = time_path(np.array([WORLD.start, near, WORLD.start + SHORT_MOVE]),
                      arm.velocity_limits, 0.5)
-    messages = [(int(1e9), JS, js_message(JOINTS, WORLD.start, 1.0)),
-                (int(1.01e9), TRAJ, traj_message(path, JOINTS))]
-    for k in range(1, int((path.duration + 1.0) * RATE)):
-        t = 1.01 + k / RATE
-        q = path.at(max(k / RATE - DetectorSettings().motion_delay, 0.0))
-        messages.append((int(t * 1e9), JS, js_message(JOINTS, q, t)))
+    messages = followed(path)
     result = replay_of(tmp_path / 'bag', messages, {JS: JS_TYPE, TRAJ: TRAJ_TYPE})
     assert result.paths == 1 and result.success and not result.blocks, result.problems
 
