@@ -559,14 +559,18 @@ class Run:
             return
         limit = UNCOMMANDED * self.settings.detection.d_dist + self.rest_slack
         away = float(np.abs(self.measured - self.rest_at).sum())
-        if self.trajectory is not None:
-            # or on the way the last command has taken the arm so far, at whatever lag (a
-            # stop sent by the run before this one may still brake it: 0.44 rad L1 from 0.7
-            # of the velocity limits), or where the command holds it
-            command = self.trajectory
-            reached = command.segment_at(self._now - command.taken_at) + 2
-            way = np.vstack([command.points[:reached], command.command.positions[-1:]])
-            away = min(away, float(np.abs(way - self.measured).sum(axis=1).min()))
+        command = self.trajectory
+        if command is not None:         # or where the last command holds it
+            held = command.command.positions[-1]
+            away = min(away, float(np.abs(self.measured - held).sum()))
+            t = self._now - command.taken_at
+            detection = self.settings.detection
+            if t <= command.duration + detection.motion_delay + detection.settle_time:
+                # or, while it may still run, on the way it has taken the arm so far, at
+                # any lag: a stop sent by the run before this one may still brake the arm
+                # (0.44 rad L1 from 0.7 of the velocity limits in the node's test)
+                way = command.points[:command.segment_at(t) + 2]
+                away = min(away, float(np.abs(way - self.measured).sum(axis=1).min()))
         if away > limit:
             self.finish(State.STOPPED, f'the arm moved {away:.3f} rad (L1) while at rest between '
                                        f'commands: something other than this planner drives it; '

@@ -875,16 +875,26 @@ def test_an_arm_still_running_the_last_command_at_a_new_start_is_no_foreign_moti
     assert run.active and run.phase.value == 'planning', run.message
 
 
-def test_an_arm_leaving_the_way_of_its_last_command_at_a_new_start_is_stopped():
-    # on that command's way at any lag is this planner's motion; off it, something else's
+@pytest.mark.parametrize('back', [False, True])
+def test_an_arm_leaving_the_way_of_its_last_command_at_a_new_start_is_stopped(back):
+    # on that command's way at any lag, while it runs, is this planner's motion; off it,
+    # or back along it once the command has run out and the arm settled, something else's
     end = Q0 + np.array([0.6, 0, 0, 0, 0, 0, 0])
     running = trajectory(Q0, end)
     loop = Disentangler(ARM, Planner(), Q1, max_paths=5, seed=0, goal_tolerance=0.04)
     run = Run(ARM, loop, RunSettings(), clock=lambda: 0.0)
     run.start(0.0, Q0, running=running)
-    for t in np.arange(0.01, running.duration + 0.5, 0.01):
-        run.on_joint_state(t, running.sample(t)[0] + np.array([0, 0, 0.5 * t, 0, 0, 0, 0]))
+    after = running.duration + 1.0
+    for t in np.arange(0.01, after + 2.0, 0.01):
+        if back:      # on time, then pushed back along its way a second after its end
+            q = running.sample(t if t <= after else 2 * after - t)[0]
+        else:
+            q = running.sample(t)[0] + np.array([0, 0, 0.5 * t, 0, 0, 0, 0])
+        run.on_joint_state(t, q)
+        if not run.active:
+            break
     assert not run.active and 'something other than this planner' in run.message
+    assert not back or t > after
 
 
 # ------------------------------------------------------------------ what the gate refuses
