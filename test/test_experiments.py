@@ -370,16 +370,18 @@ def test_the_joint_states_a_planner_missed_are_counted_from_its_bag(tmp_path):
     assert not valid({'max_state_gap_s': longest}) and valid({'max_state_gap_s': 0.01})
 
 
-def test_the_claims_compare_with_the_best_baseline_and_find_ranking_flips():
-    def cell(obstacles, method, success, ci=(0.0, 1.0)):
-        return {'setting': '2d', 'obstacles': obstacles, 'method': method,
-                'success': success, 'ci95': list(ci)}
+def claims_cell(obstacles, method, success, ci=(0.0, 1.0)) -> dict:
+    """Return a 2-D summary cell of a claims test."""
+    return {'setting': '2d', 'obstacles': obstacles, 'method': method,
+            'success': success, 'ci95': list(ci)}
 
+
+def test_the_claims_compare_with_the_best_baseline_and_find_ranking_flips():
     summary = {'cells': [
-        cell(1, 'probabilistic', 0.9, (0.8, 0.95)), cell(1, 'hard:0.01', 0.5),
-        cell(1, 'hard:0.02', 0.7), cell(1, 'epsilon:0.2', 0.6),
-        cell(10, 'probabilistic', 0.6, (0.5, 0.7)), cell(10, 'hard:0.01', 0.65),
-        cell(10, 'hard:0.02', 0.4), cell(10, 'epsilon:0.2', 0.6)]}
+        claims_cell(1, 'probabilistic', 0.9, (0.8, 0.95)), claims_cell(1, 'hard:0.01', 0.5),
+        claims_cell(1, 'hard:0.02', 0.7), claims_cell(1, 'epsilon:0.2', 0.6),
+        claims_cell(10, 'probabilistic', 0.6, (0.5, 0.7)), claims_cell(10, 'hard:0.01', 0.65),
+        claims_cell(10, 'hard:0.02', 0.4), claims_cell(10, 'epsilon:0.2', 0.6)]}
     verdicts = claims(summary)
     rows = {b['obstacles']: b for b in verdicts['beats_every_baseline']}
     assert (rows[1]['best_baseline'], rows[1]['at_least_as_good'], rows[1]['clear']) == \
@@ -456,14 +458,10 @@ def test_the_claims_take_a_tie_as_good_a_clear_win_by_the_lower_bound_and_no_var
     # a tie with the best baseline is "at least as good"; "clearly" only where the lower end
     # of probabilistic's interval is above the baseline's rate; probabilistic with another
     # c_fail is the paper's method too, never its baseline
-    def cell(obstacles, method, success, ci=(0.0, 1.0)):
-        return {'setting': '2d', 'obstacles': obstacles, 'method': method,
-                'success': success, 'ci95': list(ci)}
-
     summary = {'cells': [
-        cell(1, 'probabilistic', 0.7, (0.55, 0.85)), cell(1, 'hard:0.01', 0.7),
-        cell(10, 'probabilistic', 0.8, (0.65, 0.9)), cell(10, 'epsilon:0.2', 0.7),
-        cell(10, 'probabilistic:2.0', 0.95, (0.85, 1.0))]}
+        claims_cell(1, 'probabilistic', 0.7, (0.55, 0.85)), claims_cell(1, 'hard:0.01', 0.7),
+        claims_cell(10, 'probabilistic', 0.8, (0.65, 0.9)), claims_cell(10, 'epsilon:0.2', 0.7),
+        claims_cell(10, 'probabilistic:2.0', 0.95, (0.85, 1.0))]}
     verdicts = claims(summary)
     rows = {b['obstacles']: b for b in verdicts['beats_every_baseline']}
     assert (rows[1]['best_baseline'], rows[1]['at_least_as_good'], rows[1]['clear']) == \
