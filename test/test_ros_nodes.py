@@ -554,10 +554,17 @@ def test_the_physics_mock_takes_its_faults_from_its_parameters(ros):
         Parameter('engine', value='physics'), Parameter('scene', value='demo_hook'),
         Parameter('armature', value=0.3), Parameter('object_mass_error', value=0.1),
         Parameter('latency', value=0.02), Parameter('noise', value=0.001),
-        Parameter('effort_noise', value=0.5),
+        Parameter('effort_noise', value=0.5), Parameter('joint_friction', value=0.7),
         Parameter('grasp_stiffness', value=20.0), Parameter('stiffness', value=400.0),
         Parameter('damping_ratio', value=1.0)]))
+    # what the planner cannot see, for RViz started later (latched): the hidden obstacles
+    # and the grasped object
+    drawn = []
+    ros.probe.create_subscription(
+        MarkerArray, f'/{MOCK_NODE}/scene', lambda m: drawn.append({k.ns for k in m.markers}),
+        QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
     robot = arm.robot
+    assert robot.engine.settings.joint_friction == 0.7
     np.testing.assert_array_equal(robot.engine.model.dof_armature[:7], [0.3] * 7)
     np.testing.assert_array_equal(robot.engine.model.jnt_stiffness[-3:], [20.0] * 3)
     # the robot application's impedance: the actuators' gains and the damping law's ratio
@@ -566,6 +573,8 @@ def test_the_physics_mock_takes_its_faults_from_its_parameters(ros):
     assert robot.engine.settings.object_mass_error == 0.1
     assert (robot.settings.latency, robot.settings.noise) == (0.02, 0.001)
     assert robot.settings.effort_noise == 0.5
+    wait_for(lambda: drawn, 5, 'the scene markers')
+    assert drawn[-1] == {'obstacles', 'grasped_object'}
 
 
 def test_a_full_run_against_the_physics_mock_learns_and_persists_failures(ros, tmp_path):
