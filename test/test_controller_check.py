@@ -148,3 +148,75 @@ def test_a_path_tolerance_below_the_arms_lag_is_named(setting):
     assert check.below_lag({'lbr_A1': 0.01}) == ''
     check.holds = {}                                        # 0: no tolerance, no hold
     assert check.below_lag({'lbr_A1': 0.2}) == ''
+
+
+def test_either_start_parameter_true_is_the_desired_start(setting):
+    # JTC (Jazzy) starts from its last command when either is true: one answered false and
+    # the deprecated open_loop_control true still start there
+    check, client, _ = setting
+    check.poll()
+    answer_all(client, {'interpolate_from_desired_state': False, 'open_loop_control': True,
+                        'constraints.goal_time': 0.0})
+    assert check.value is True and 'from its last command' in check.refusal(False)
+
+
+def test_a_goal_time_and_whole_number_constraints_are_holds(setting):
+    # a hold on the goal time is JTC's own hold as much as a path tolerance; a number the
+    # node holds as an integer is a number all the same
+    check, client, _ = setting
+    check.poll()
+    answer_all(client, {'interpolate_from_desired_state': True, 'constraints.goal_time': 0.5})
+    assert check.holds == {'constraints.goal_time': 0.5}
+    assert 'constraints.goal_time 0.5' in check.refusal(True)
+    setting[2][0] += POLL
+    check.poll()
+    for future in list(client.calls):
+        if future.name == 'cmd_timeout':
+            future.answer(ParameterValue(type=ParameterType.PARAMETER_INTEGER,
+                                         integer_value=2))
+        elif future.name == 'interpolate_from_desired_state':
+            future.answer(ParameterValue(type=ParameterType.PARAMETER_BOOL, bool_value=True))
+        else:
+            future.answer(None)
+    assert check.holds == {'cmd_timeout': 2.0}
+
+
+def test_the_controller_is_asked_once_a_poll_period_and_believed_while_it_answers(setting):
+    # asked at every tick of the node, the controller got a batch of calls every few ms;
+    # a controller answering every period must stay known, and one that goes is unknown at once
+    check, client, clock = setting
+    assert check.first_answer_due()
+    check.poll()
+    answer_all(client, {'interpolate_from_desired_state': True, 'constraints.goal_time': 0.0})
+    assert not check.first_answer_due()
+    check.poll()
+    assert client.calls == []                  # answered, and not due again yet
+    for _ in range(4):                         # 4 periods, past 2.5: still answering
+        clock[0] += POLL
+        check.poll()
+        assert check.value is True            # while asked again: still the last answer
+        answer_all(client, {'interpolate_from_desired_state': True})
+        assert check.value is True and check.refusal(True) == ''
+    client.ready = False                       # the controller's node went
+    check.poll()
+    assert check.value is None and 'does not answer' in check.refusal(True)
+
+
+def test_a_young_node_waits_for_the_controllers_first_answer_a_while_only(setting):
+    check, _, clock = setting
+    clock[0] += 2 * POLL - 0.1
+    assert check.first_answer_due()
+    clock[0] += 0.2
+    assert not check.first_answer_due()
+
+
+def test_a_controller_node_with_a_trailing_slash_or_none_at_all(monkeypatch):
+    made = []
+    node = SimpleNamespace(create_client=lambda kind, name: made.append(name) or Client())
+    ControllerSetting(node, '/lbr/joint_trajectory_controller/', ['lbr_A1'])
+    assert made == ['/lbr/joint_trajectory_controller/get_parameters']
+    # '': the user opted out of the check: no client, never refused, never asked
+    skipped = ControllerSetting(node, '', ['lbr_A1'])
+    skipped.poll()
+    assert len(made) == 1 and skipped.refusal(True) == '' and skipped.refusal(False) == ''
+    assert not skipped.first_answer_due()

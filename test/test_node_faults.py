@@ -336,6 +336,32 @@ class HungFile:
         return getattr(self.real, name)
 
 
+def test_a_flushed_recording_is_on_disk_before_the_bag_is_closed(tmp_path):
+    # what a planner killed with SIGKILL leaves: every message flushed, none twice, none of
+    # a topic never declared; closed, the bag counts what it wrote
+    from probdis_ros.ros.recorder import BagRecorder
+    from rclpy.serialization import serialize_message
+
+    recorder = BagRecorder(tmp_path / 'bag')
+    topic = '/probdis_planner/status'
+    for _ in range(2):                      # declared twice: one connection
+        recorder.add_topic(topic, 'std_msgs/msg/String')
+    for k in range(3):
+        recorder.write(topic, 10**9 + k, serialize_message(String(data=str(k))))
+    recorder.write('/undeclared', 10**9, b'')
+    recorder.flush()
+
+    def on_disk():
+        with Bag(tmp_path / 'bag') as bag:
+            return bag.count()
+    wait_for(lambda: on_disk() == 3, 5, 'the flushed messages on disk')
+    recorder.close()
+    assert (recorder.error, recorder.count) == ('', 3)
+    recorder.write(topic, 2 * 10**9, serialize_message(String(data='late')))   # closed
+    with Bag(tmp_path / 'bag') as bag:
+        assert [bag.deserialize(m).data for m in bag.messages()] == ['0', '1', '2']
+
+
 def test_a_hanging_disk_never_holds_the_supervision(ros, tmp_path):
     # the bag was written in the executor's callbacks: a write that hangs held the joint
     # states, the state timeout and every stop behind it
