@@ -30,7 +30,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 import numpy as np
 from probdis_ros.model import FailureMap, iiwa_arm
 from probdis_ros.model.arms import TaskSpace
-from probdis_ros.ros.bag_source import Bag
+from probdis_ros.ros.bag_source import Bag, BagError
 from probdis_ros.ros.messages import duration
 from probdis_ros.ros.mock_iiwa_node import MockIiwa
 from probdis_ros.ros.planner_node import CLOCK_STALL, DISCOVERY_WAIT, HALT_WAIT, PlannerNode
@@ -351,15 +351,26 @@ def test_a_flushed_recording_is_on_disk_before_the_bag_is_closed(tmp_path):
     recorder.write('/undeclared', 10**9, b'')
     recorder.flush()
 
-    def on_disk():
-        with Bag(tmp_path / 'bag') as bag:
-            return bag.count()
+    def on_disk(path=tmp_path / 'bag'):
+        try:
+            with Bag(path) as bag:
+                return bag.count()
+        except BagError:            # nothing on disk yet
+            return 0
     wait_for(lambda: on_disk() == 3, 5, 'the flushed messages on disk')
     recorder.close()
     assert (recorder.error, recorder.count) == ('', 3)
     recorder.write(topic, 2 * 10**9, serialize_message(String(data='late')))   # closed
     with Bag(tmp_path / 'bag') as bag:
         assert [bag.deserialize(m).data for m in bag.messages()] == ['0', '1', '2']
+    # unasked, a write flushes once flush_interval has passed since the last flush
+    eager = BagRecorder(tmp_path / 'eager', flush_interval=0.0)
+    eager.add_topic(topic, 'std_msgs/msg/String')
+    eager.write(topic, 10**9, serialize_message(String(data='0')))
+    try:
+        wait_for(lambda: on_disk(tmp_path / 'eager') == 1, 5, 'the message on disk, unasked')
+    finally:
+        eager.close()
 
 
 def test_a_hanging_disk_never_holds_the_supervision(ros, tmp_path):
