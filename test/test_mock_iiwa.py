@@ -183,8 +183,9 @@ def test_a_starved_1khz_mock_catches_up_every_period_it_owes(make, clock):
 
 
 def test_the_joint_states_are_stamped_when_measured_with_the_fields_asked_for(make, clock):
-    # with latency the driver reports a state measured that long ago, stamped then
-    arm = make(latency=0.05, publish_velocities=False, joint_names=[
+    # with latency the driver reports a state measured that long ago, stamped then; its
+    # positions are the reported ones (encoder noise here), not the simulated arm's truth
+    arm = make(latency=0.05, noise=0.001, publish_velocities=False, joint_names=[
         f'iiwa_A{i}' for i in range(1, 8)])
     arm.pub = published = Recorder()
     arm._tick()
@@ -192,6 +193,8 @@ def test_the_joint_states_are_stamped_when_measured_with_the_fields_asked_for(ma
     arm._tick()
     msg, = published.messages
     assert stamp(msg) == pytest.approx(T0 + 0.05, abs=1e-6)
+    np.testing.assert_array_equal(msg.position, arm.robot.joint_state().position)
+    assert np.abs(np.array(msg.position) - arm.q).max() > 1e-4
     assert list(msg.name) == [f'iiwa_A{i}' for i in range(1, 8)]
     assert list(msg.velocity) == [] and list(msg.effort) == []    # the kinematic arm: none
     assert len(make().robot.joint_state().velocity) == 7
