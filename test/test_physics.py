@@ -165,6 +165,22 @@ def test_external_torque_is_the_contact_force_mapped_to_the_joints():
     # no joint is at a limit, so all constraint force is contact force
     np.testing.assert_allclose(arm.tau_external, arm.data.qfrc_constraint[:7], atol=1e-6)
     assert abs(arm.tau_external[1]) > 5                    # A2 is held back
+    # a ball under the bar: MuJoCo lists the scene's geom first in that contact (a sphere
+    # before the bar's capsule), so the robot is the contact's second geom
+    pos, rot = ARM.tip_frames(START)
+    ball = {'type': 'sphere', 'radius': 0.05,
+            'position': (pos[0] + 0.15 * rot[0][:, 2] - [0, 0, 0.066]).tolist()}
+    goal = START + np.array([0, 0.3, 0, 0, 0, 0, 0])
+    arm = PhysicsIiwa(scene_from_dict({'start': START.tolist(), 'goal': goal.tolist(),
+                                       'object': {'mass': 0.5, 'shapes': [BAR]},
+                                       'obstacles': [ball]}))
+    ramp(arm, START, goal, 1.0)
+    arm.advance(goal, 0.2)
+    assert arm.model.geom(int(arm.data.contact.geom[0][1])).name == 'object/0'
+    np.testing.assert_allclose(arm.tau_external, arm.data.qfrc_constraint[:7], atol=1e-6)
+    assert abs(arm.tau_external[1]) > 5
+    (contact,) = arm.contacts()
+    assert contact.normal @ (contact.position - ball['position']) > 0   # out of the ball
 
 
 def test_torques_never_exceed_the_urdf_efforts_even_when_the_law_asks_for_more():
@@ -225,6 +241,23 @@ def test_in_collision_clearance_counts_near_misses():
     assert not arm.in_collision(START, clearance=0.012)
 
 
+def test_a_long_advance_is_the_same_as_one_per_period_and_damping_follows_the_arm():
+    # D(q) is recomputed every damping_update (10 ms) within one call too: holding a
+    # setpoint for 1 s in one call moves the arm as 100 calls of 10 ms do, and at the end
+    # the damping is KUKA's law at where the arm went, not where the call began
+    goal = START + np.array([0.5, -0.6, 0.4, 0.9, 0.3, -0.5, 0.5])
+    once, per_period = PhysicsIiwa(bar_scene(box=False)), PhysicsIiwa(bar_scene(box=False))
+    once.advance(goal, 1.0)
+    for _ in range(100):
+        per_period.advance(goal, 0.01)
+    np.testing.assert_array_equal(once.q, per_period.q)
+    np.testing.assert_array_equal(once.qdot, per_period.qdot)
+    full = np.zeros((7, 7))
+    mujoco.mj_fullM(once.model, once.data, full)
+    expected = 2 * 0.7 * np.sqrt(200.0 * np.diag(full))
+    np.testing.assert_allclose(-once.model.actuator_biasprm[:, 2], expected, rtol=0.02)
+
+
 def test_advance_keeps_the_callers_clock_with_durations_that_are_not_whole_steps():
     arm = PhysicsIiwa()
     for _ in range(40):
@@ -267,3 +300,31 @@ def test_a_grasp_that_gives_turns_the_object_when_pressed_and_a_welded_one_does_
     assert 0.02 < turns[20.0] < 0.5
     with pytest.raises(ValueError, match='grasp_stiffness'):
         PhysicsSettings(grasp_stiffness=-1.0)
+
+
+def test_a_gate_given_as_either_sign_of_its_quaternion_is_one_gate():
+    # q and -q are one orientation: a gate written either way is solid to the object held so
+    pos = ARM.tip_frames(START)[0]
+    quat = ARM.fk(START[None]).orientations[0]
+    for sign in (1.0, -1.0):
+        wall = {'type': 'sphere', 'radius': 0.03, 'position': (pos[0] + [0, 0, -0.3]).tolist(),
+                'gate': {'orientation': (sign * quat).tolist(), 'tolerance': 0.1}}
+        arm = PhysicsIiwa(scene_from_dict({'start': START.tolist(), 'goal': START.tolist(),
+                                           'obstacles': [wall]}))
+        assert arm.gates_solid().all(), sign
+
+
+def test_a_hinged_obstacle_turns_about_its_files_axis_and_its_weight_does_not_turn_it():
+    # clutter that yields: the hinge's axis and point are given in the base frame, whatever
+    # the obstacle's own rotation; the hinge carries its weight, so at rest it keeps its pose
+    flap = {'type': 'box', 'size': [0.16, 0.24, 0.02], 'position': [0.5, 0.2, 0.3],
+            'rpy': [0.0, 0.0, 0.7], 'mass': 0.3,
+            'hinge': {'point': [0.5, 0.08, 0.3], 'axis': [1, 0, 0], 'stiffness': 20.0,
+                      'damping': 0.5}}
+    arm = PhysicsIiwa(scene_from_dict({'start': START.tolist(), 'goal': START.tolist(),
+                                       'obstacles': [flap]}), FREE_SPACE)
+    hinge = arm.model.joint('obstacles[0]/hinge').id
+    np.testing.assert_allclose(arm.data.xaxis[hinge], [1, 0, 0], atol=1e-12)
+    np.testing.assert_allclose(arm.data.xanchor[hinge], [0.5, 0.08, 0.3], atol=1e-12)
+    arm.advance(START, 1.0)
+    assert abs(arm.data.qpos[arm.model.jnt_qposadr[hinge]]) < 1e-9

@@ -109,7 +109,8 @@ def test_latency_delays_and_noise_perturbs_the_reported_state_reproducibly():
     goal = np.array([0.3, 0.2, 0.0, -1.1, 0.0, 0.6, 0.0])
     runs = []
     for settings in (RobotSettings(), RobotSettings(latency=0.05),
-                     RobotSettings(noise=0.01, seed=4), RobotSettings(noise=0.01, seed=4)):
+                     RobotSettings(noise=0.01, seed=4), RobotSettings(noise=0.01, seed=4),
+                     RobotSettings(latency=0.055)):
         robot, _ = build_robot('kinematic', 'demo_iiwa', settings)
         command_to(robot, goal, 1.0)
         states = []
@@ -117,9 +118,12 @@ def test_latency_delays_and_noise_perturbs_the_reported_state_reproducibly():
             robot.step()
             states.append(robot.joint_state())
         runs.append(states)
-    plain, late, noisy, again = runs
+    plain, late, noisy, again, later = runs
     assert late[-1].time == pytest.approx(plain[-1].time - 0.05)
     np.testing.assert_allclose(late[-1].position, plain[-6].position)
+    # a latency between two periods: the newest state at least that old, never a newer one
+    assert later[-1].time == pytest.approx(plain[-1].time - 0.06)
+    np.testing.assert_allclose(later[-1].position, plain[-7].position)
     assert np.std(noisy[-1].position - plain[-1].position) > 0.003
     np.testing.assert_array_equal(noisy[-1].position, again[-1].position)
 
@@ -348,20 +352,23 @@ def test_a_command_whose_spline_overflows_is_held_not_a_crash(engine):
     np.testing.assert_allclose(robot.joint_state().position, held, atol=0.01)
 
 
-def test_the_command_guard_stops_the_driver_on_a_command_past_a_limit():
+@pytest.mark.parametrize('side', [1, -1])
+def test_the_command_guard_stops_the_driver_on_a_command_past_a_limit(side):
     # without ros2_control's joint limiter (enforce_command_limits false) the command
     # reaches the driver's guard, which ends the session; with it (the lbr stack's
-    # default) the command is held at the limit and the driver stays up
+    # default) the command is held at the limit and the driver stays up: past the upper
+    # limit and past the lower one alike
+    limit = ARM.upper[0] if side > 0 else ARM.lower[0]
     for limiter in (False, True):
         robot, _ = build_robot('kinematic', 'demo_iiwa', RobotSettings(limiter=limiter))
         beyond = robot.joint_state().position.copy()
-        beyond[0] = ARM.upper[0] + 0.05
+        beyond[0] = limit + side * 0.05
         _, duration = command_to(robot, beyond, 0.5)
         while robot.stopped is None and robot.time < duration + 1.0:
             robot.step()
-            assert robot.engine.q[0] <= ARM.upper[0]
+            assert side * robot.engine.q[0] <= side * limit
         if limiter:
-            assert robot.stopped is None and robot.limiter.value[0] == ARM.upper[0]
+            assert robot.stopped is None and robot.limiter.value[0] == limit
         else:
             assert robot.stopped is not None and 'A1 outside its limits' in robot.stopped
 
@@ -388,3 +395,48 @@ def test_the_joint_limiter_ramps_the_step_of_a_new_command_at_the_velocity_limit
             assert robot.sent_speed_peak <= 1.0 + 1e-9
         else:
             assert robot.sent_speed_peak > 1.5
+
+
+def test_the_faults_reach_the_physics_arm_and_the_driver_that_build_robot_makes():
+    # probdis experiment robot --fault NAME=VALUE: each fault must reach MuJoCo's model or
+    # the driver, not leave the ideal mock running under its name
+    from probdis_ros.physics.simulated_robot import with_faults
+
+    settings, physics = with_faults({'armature': 0.3, 'stiffness': 150.0, 'joint_friction': 2.0,
+                                     'damping_ratio': 0.5, 'noise': 0.001})
+    robot, _ = build_robot('physics', free_scene(), settings, physics)
+    model = robot.engine.model
+    np.testing.assert_array_equal(model.dof_armature[:7], 0.3)
+    np.testing.assert_array_equal(model.dof_frictionloss[:7], 2.0)
+    np.testing.assert_array_equal(model.actuator_gainprm[:, 0], 150.0)
+    assert robot.engine.settings.damping_ratio == 0.5 and robot.settings.noise == 0.001
+
+
+def test_kukas_collision_detection_stops_on_one_joints_torque_not_on_their_sum():
+    # the safety configuration's limit is per joint: 10 Nm on each of seven joints stays
+    # under 15 Nm; 16 Nm on one of them stops the driver, naming it
+    for pushed, stops in ((np.full(7, 10.0), False), (np.eye(7)[3] * -16.0, True)):
+        robot, _ = build_robot('kinematic', 'demo_iiwa', RobotSettings(collision_torque=15.0))
+        robot.engine.tau_external = pushed
+        robot.step()
+        assert (robot.stopped is not None) == stops
+    assert 'external torque of 16.0 Nm at A4' in robot.stopped
+
+
+def test_the_kinematic_arm_stops_at_the_table_before_an_obstacle_and_may_rise_from_below():
+    # the compliant arm of the kinematic engine: the first contact along the path stops it,
+    # the table's or an obstacle's; an arm that starts below the table top may rise
+    from probdis_ros.model.table import ROBOT_TABLE
+    from probdis_ros.sim.compliant_arm import CompliantArm
+    from probdis_ros.sim.obstacles import Obstacle
+
+    arm = ARM.on_table(ROBOT_TABLE)
+    high = np.array([0.0, 0.3, 0.0, -1.0, 0.0, 0.8, 0.0])
+    low = np.array([0.0, 1.9, 0.0, -0.4, 0.0, 0.8, 0.0])
+    table_only = CompliantArm(arm, []).execute(np.array([high, low]))
+    assert table_only.blocked and arm.lowest_heights(low)[0] < ROBOT_TABLE.height
+    beyond = ARM.fk(low[None]).positions[0]          # a ball past the table's contact
+    both = CompliantArm(arm, [Obstacle('ball', beyond, 0.05)]).execute(np.array([high, low]))
+    np.testing.assert_array_equal(both.config, table_only.config)
+    rise = CompliantArm(arm, []).execute(np.array([low, high]))
+    assert not rise.blocked
