@@ -61,6 +61,18 @@ def test_the_kinematic_engine_copies_the_command_and_stops_dead_at_contact():
     assert lags[0] < 0.05          # before the contact it followed the command closely
 
 
+def test_the_kinematic_engine_follows_a_far_setpoint_within_the_velocity_limits():
+    # the servo lag closes a fifth of the gap per period, but never faster than the URDF's
+    # velocity limits: a far setpoint (a driver without the joint limiter) is approached at them
+    robot, _ = build_robot('kinematic', 'demo_iiwa', RobotSettings(guard=False))
+    engine, period = robot.engine, robot.settings.period
+    start = engine.q.copy()
+    far = start + np.array([0.0, 0.0, 0.5, 0.0, 0.5, 0.0, 0.5])   # free of the scenario
+    engine.advance(far, period)
+    np.testing.assert_allclose(np.abs(engine.q - start),
+                               np.where(far != start, ARM.velocity_limits * period, 0.0))
+
+
 def test_the_physics_arm_lags_and_an_echoing_driver_hides_it():
     goal = np.array([0.5, 0.3, 0.2, -1.0, 0.1, 0.7, 0.2])
     gaps = {}
@@ -255,6 +267,16 @@ def test_the_command_guard_stops_the_driver_on_a_speed_the_arm_may_not_reach():
         robot.step()
     assert robot.joint_state() is last and robot.time > last.time + 0.4
     assert np.abs(robot.engine.q - held).max() < 0.05
+    # restarted where it holds: no command of before survives, not even in the joint
+    # limiter, whose last command ran far ahead of the arm
+    for _ in range(100):
+        robot.step()
+    robot.restart()
+    held = robot.engine.q.copy()
+    for _ in range(50):
+        robot.step()
+    assert robot.stopped is None
+    np.testing.assert_allclose(robot.engine.q, held, atol=2e-3)
     for scaling in (0.2, MAX_VELOCITY_SCALING):
         assert measure.long_edge(scaling).speed_over_limit < 0.95
 
