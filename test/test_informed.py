@@ -109,6 +109,15 @@ def test_probabilistic_keeps_the_papers_map_and_loop():
     assert type(loop) is Disentangler
 
 
+@pytest.mark.parametrize('ideas, expected', [
+    ('b', MapIdeas(surface=True)), ('c', MapIdeas(free=True)), ('e', MapIdeas(adaptive=True)),
+    ('abce', MapIdeas(surface=True, free=True, adaptive=True))])
+def test_each_map_idea_is_switched_by_its_own_letter(ideas, expected):
+    fmap = Method.parse(f'informed:{ideas}').failure_map(TaskSpace.POSE3)
+    assert isinstance(fmap, InformedMap) and fmap.ideas == expected
+    assert type(Method.parse('informed:adfhij').failure_map(TaskSpace.POSE3)) is FailureMap
+
+
 # -- idea a: budget ------------------------------------------------------------------------
 
 def test_idea_a_multiplies_the_iterations_and_nothing_else():
@@ -278,6 +287,14 @@ def test_idea_d_probes_follow_straight_lines_from_the_start():
                                      axis=1) <= settings.joint_step + 0.1)
         long += along[-1] > 0.3
     assert long >= 6
+    # from a cramped start most chains stray before their end: each ends there, and none
+    # goes on farther along its line once the arm can follow it again (a gap, then a jump)
+    cramped = np.array([0.813, -0.964, -2.724, -2.025, 1.859, 1.729, 0.651])
+    x0 = arm.positions(cramped)[0]
+    directions = even_directions(32, 3)
+    for direction, chain in zip(directions, probe_chains(arm, cramped, directions, settings)):
+        along = np.concatenate([[0.0], (arm.positions(chain) - x0) @ direction])
+        assert np.all(np.diff(along) <= settings.spacing + 2 * settings.tolerance), along
 
 
 def test_idea_f_probes_turn_in_place_then_go_straight():
@@ -373,7 +390,25 @@ def test_ideas_d_and_f_hang_probes_from_the_start_tree_only():
         assert goal.size <= 6 < start.size
         sizes[ideas] = start.size
         np.testing.assert_array_equal(start.nodes[0], IIWA_START)
+        assert len(start.children[0]) > 16            # each chain hangs from the root
     assert sizes['df'] > max(sizes['d'], sizes['f'])
+    # without orientation a turn is no turn: f alone offers the straight probes
+    arm = arm_for_setting('3d')
+    planner = Method.parse('informed:f').planner(arm, settings)
+    coster = planner.objective.coster(arm, FailureMap(arm.task_space), settings.delta)
+    assert planner.grow(IIWA_START, -0.5 * IIWA_START, coster,
+                        np.random.default_rng(0))[0].size > 6 + 16
+
+
+def test_the_probes_point_elsewhere_at_every_plan():
+    """The lattice of directions is turned by a draw per plan, not the same at every plan."""
+    arm = arm_for_setting('3d-orient')
+    planner = Method.parse('informed:d').planner(arm, RRTSettings(iterations=1, n_random=1))
+    coster = planner.objective.coster(arm, FailureMap(arm.task_space))
+    trees = [planner.grow(IIWA_START, -0.5 * IIWA_START, coster, np.random.default_rng(seed))[0]
+             for seed in (0, 1)]
+    first = [tree.nodes[tree.children[0]] for tree in trees]
+    assert not np.array_equal(first[0][:10], first[1][:10])
 
 
 def test_idea_d_offers_a_straight_way_out_in_almost_every_direction():
@@ -410,6 +445,13 @@ def test_idea_g_offers_no_probe_toward_a_failure_within_reach():
     far = FailureMap(arm.task_space)
     far.add(x0 + 0.6 * ahead, ahead, q0)                    # beyond the probes' reach
     assert planner._untried(directions, x0, far).all()
+    # two failures in two directions: neither direction keeps its probe
+    fmap.add(x0 + 0.2 * directions[20], directions[20], q0)
+    keep = planner._untried(directions, x0, fmap)
+    assert not keep[5] and not keep[20] and keep.sum() >= len(directions) - 6
+    # without g every direction keeps its probe
+    straight = Method.parse('informed:d').planner(arm, RRTSettings(iterations=1, n_random=1))
+    assert straight._untried(directions, x0, fmap).all()
 
 
 # -- the method does better than the paper's on family worlds ---------------------------------

@@ -97,6 +97,21 @@ def test_reproducible_from_its_seed():
 
 
 @pytest.mark.parametrize('setting', ['2d', '3d-orient'])
+def test_the_goal_bias_aims_each_tree_at_the_other_trees_root(setting):
+    """P_GOAL = 1: every iteration steps toward the other root, so each tree reaches it."""
+    arm = arm_for_setting(setting)
+    start, goal = (START, GOAL) if setting == '2d' else \
+        arm.random_configurations(np.random.default_rng(5), 2)
+    iterations = int(np.ceil(np.linalg.norm(goal - start))) + 1       # steps of 1 rad
+    planner = ProbRRT(arm, RRTSettings(iterations=iterations, p_goal=1.0))
+    trees = planner.grow(start, goal, planner.objective.coster(arm, FailureMap(arm.task_space)),
+                         np.random.default_rng(0))
+    for tree, other_root in zip(trees, (goal, start)):
+        gaps = np.linalg.norm(tree.nodes[:tree.size] - other_root, axis=1)
+        assert gaps.min() < 1e-9, gaps
+
+
+@pytest.mark.parametrize('setting', ['2d', '3d-orient'])
 def test_compiled_costs_give_the_same_plans_as_the_reference(setting):
     """The speed-ups (compiled kernel, stepped trig, exact pruning) change no decision."""
     arm = arm_for_setting(setting)
@@ -110,6 +125,22 @@ def test_compiled_costs_give_the_same_plans_as_the_reference(setting):
             start, goal, fmap, np.random.default_rng(seed))
         np.testing.assert_array_equal(fast.path, slow.path)
         assert fast.cost == pytest.approx(slow.cost, rel=1e-9)
+
+
+def test_the_python_loop_plans_as_the_compiled_one_with_few_neighbours():
+    """The planar arm's loop (Python) adds the closest node to few neighbours as the compiled."""
+    # with one to three RRT* neighbours the closest node is often not among them
+    arm = arm_for_setting('3d-orient')
+    rng = np.random.default_rng(3)
+    fmap = scattered_map(arm, rng, 19)
+    start, goal = arm.random_configurations(rng, 2)
+    settings = RRTSettings(iterations=25, rewire_factor=0.2)
+    for seed in range(2):
+        fast = ProbRRT(arm, settings).plan(start, goal, fmap, np.random.default_rng(seed))
+        slow = ProbRRT(arm, settings, compiled=False).plan(start, goal, fmap,
+                                                           np.random.default_rng(seed))
+        np.testing.assert_array_equal(fast.path, slow.path)
+        assert fast.cost == slow.cost and fast.rewires == slow.rewires
 
 
 def test_compiled_edge_costs_match_the_reference():
@@ -223,6 +254,29 @@ def test_method_strings_are_parsed_and_built_in_one_place():
     assert Method.parse('informed:af').objective() == FailureProbabilityObjective()
 
 
+def test_a_methods_parameters_reach_its_planner_and_its_map():
+    """Each parameter of a method string or flag is the one its planner and map use."""
+    assert Method.parse('epsilon:0.4').planner(PLANAR).epsilon == 0.4
+    # only probabilistic sets the map's C_FAIL: Hard's Y is no C_FAIL
+    assert Method.parse('hard:0.02').map_c_fail() == Method.parse('probabilistic').map_c_fail()
+    assert Method.resolve('probabilistic', c_fail=300.0).map_c_fail() == 300.0
+    settings = RRTSettings(iterations=1)
+    for text in ('probabilistic', 'informed:a', 'informed:h'):
+        method = Method.parse(text)
+        assert method.planner(PLANAR, settings, length_weight=0.5).objective.length_weight == 0.5
+        assert method.failure_map(PLANAR.task_space, c_fail=50.0).c_fail == 50.0
+
+
+def test_an_objective_costs_with_the_planners_delta_and_a_reach_must_be_positive():
+    fmap = wall_map()
+    objective = FailureProbabilityObjective()
+    coarse = objective.coster(PLANAR, fmap, 0.3)
+    assert coarse.delta == 0.3
+    assert coarse.cost(START, GOAL) != objective.coster(PLANAR, fmap).cost(START, GOAL)
+    with pytest.raises(ValueError, match='reach'):
+        FailureProbabilityObjective(reach=0.0)
+
+
 def test_epsilon_ignores_the_map():
     planner = EpsilonPlanner(PLANAR, epsilon=0.5)
     for seed in range(10):
@@ -233,6 +287,29 @@ def test_epsilon_ignores_the_map():
     straight = EpsilonPlanner(PLANAR, epsilon=1.0).plan(START, GOAL, wall_map(),
                                                         np.random.default_rng(0))
     np.testing.assert_array_equal(straight.path, [START, GOAL])
+
+
+def test_epsilons_random_move_is_a_step_long_or_cut_at_a_limit_and_costs_its_length():
+    planner = EpsilonPlanner(PLANAR, epsilon=0.0, step=0.5)
+    for start in (START, PLANAR.upper - 0.1):           # the second cut at the limits
+        lengths = []
+        for seed in range(10):
+            plan = planner.plan(start, GOAL, FailureMap(TaskSpace.POINT2),
+                                np.random.default_rng(seed))
+            lengths.append(np.linalg.norm(plan.path[-1] - start))
+            assert plan.cost == pytest.approx(lengths[-1], rel=1e-12)
+        assert max(lengths) <= 0.5 + 1e-12
+    assert min(lengths) < 0.5
+
+
+def test_epsilon_stays_where_no_move_keeps_the_arm_above_the_table(monkeypatch):
+    from probdis_ros.planning import epsilon
+
+    monkeypatch.setattr(epsilon, 'edge_above_table', lambda *args: False)
+    planner = EpsilonPlanner(PLANAR, epsilon=0.5)
+    plan = planner.plan(START, GOAL, FailureMap(TaskSpace.POINT2), np.random.default_rng(0))
+    np.testing.assert_array_equal(plan.path, [START, START])
+    assert plan.cost == 0.0
 
 
 def test_bad_settings_and_configurations_are_refused():
@@ -358,6 +435,25 @@ def test_a_joint_range_keeps_the_trees_probes_and_paths_in_the_cells_room(method
         ProbRRT(arm, RRTSettings(joint_lower=tuple(upper), joint_upper=tuple(lower)))
     with pytest.raises(ValueError, match='7 values'):
         ProbRRT(arm, RRTSettings(joint_lower=(0.0, 1.0)))
+
+
+@pytest.mark.parametrize('side', ['lower', 'upper'])
+def test_a_joint_range_on_one_side_alone_keeps_the_trees_in_it(side):
+    """Without a margin, a range on one side alone still clips the steps from a start outside."""
+    arm = arm_for_setting('3d-orient')
+    sign = 1.0 if side == 'upper' else -1.0
+    bound = (arm.upper if side == 'upper' else arm.lower).copy()
+    bound[0] = 0.6 * sign
+    planner = ProbRRT(arm, RRTSettings(iterations=20, **{f'joint_{side}': tuple(bound)}))
+    start = np.array([1.0 * sign, 0.5, 0.0, -1.2, 0.0, 0.8, 0.0])   # A1 beyond the range
+    goal = np.array([-0.4 * sign, 0.3, 0.2, -1.0, 0.1, 0.9, 0.2])
+    fmap = scattered_map(arm, np.random.default_rng(3), 19)
+    for seed in range(2):
+        trees = planner.grow(start, goal, planner.objective.coster(arm, fmap),
+                             np.random.default_rng(seed))
+        for tree in trees:
+            beyond = sign * (tree.nodes[1:tree.size, 0] - bound[0])
+            assert tree.size > 1 and np.all(beyond <= 1e-12), beyond.max()
 
 
 def test_a_margin_without_room_or_below_zero_is_refused():

@@ -21,6 +21,7 @@ from probdis_ros.model import arm_for_setting
 from probdis_ros.model.edge_costs import ReferenceEdgeCoster
 from probdis_ros.model.path_cost import path_cost
 from probdis_ros.planning import FailureProbabilityObjective, ProbRRT, RRTSettings
+from probdis_ros.planning.probes import ProbeRRT, ProbeSettings
 from probdis_ros.planning.tree import Tree
 import pytest
 from test_planning import scattered_map
@@ -63,6 +64,21 @@ def test_costs_equal_their_edges_and_the_plan_its_path(setting):
         plan = planner.plan(start, goal, fmap, np.random.default_rng(seed))
         assert plan.cost == pytest.approx(path_cost(arm, fmap, plan.path), rel=1e-9)
     assert rewires > 0          # the neighbourhood holds neighbours: rewiring acts
+
+
+def test_the_probes_costs_equal_their_edges_run_from_the_start():
+    """Probe chains (ideas d, f) are costed as the arm runs them, root outward."""
+    arm = arm_for_setting('3d-orient')
+    rng = np.random.default_rng(13)
+    fmap = scattered_map(arm, rng, 12)
+    start = np.array([0.3, 0.6, -0.2, -1.4, 0.2, 0.9, 0.1])
+    planner = ProbeRRT(arm, RRTSettings(iterations=10), probes=ProbeSettings(directions=6),
+                       straight=True, turning=True)
+    objective = FailureProbabilityObjective()
+    tree, _ = planner.grow(start, -0.5 * start, objective.coster(arm, fmap),
+                           np.random.default_rng(0))
+    assert tree.size > 30
+    check_tree(tree, objective.coster(arm, fmap, coster_type=ReferenceEdgeCoster))
 
 
 def test_rewiring_finds_cheaper_paths_than_none():
