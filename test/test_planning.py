@@ -97,6 +97,25 @@ def test_reproducible_from_its_seed():
 
 
 @pytest.mark.parametrize('setting', ['2d', '3d-orient'])
+def test_the_first_step_goes_toward_the_sample_farthest_from_the_tree(setting):
+    """RandomConfiguration: of |C_RAND| uniform samples, the one farthest in task space."""
+    arm = arm_for_setting(setting)
+    start, goal = arm.random_configurations(np.random.default_rng(8), 2)
+    planner = ProbRRT(arm, RRTSettings(iterations=1, n_random=50, p_goal=0.0, step=0.3))
+    tree, _ = planner.grow(start, goal, planner.objective.coster(arm, FailureMap(
+        arm.task_space)), np.random.default_rng(0))
+    # the start tree's draws come first: its goal-bias coin, then its samples
+    rng = np.random.default_rng(0)
+    rng.random(1)
+    samples = arm.lower + rng.random((50, arm.n_joints)) * (arm.upper - arm.lower)
+    gaps = np.linalg.norm(arm.positions(samples) - arm.positions(start)[0], axis=1)
+    farthest = samples[np.argmax(gaps)]
+    assert tree.size == 2
+    np.testing.assert_allclose(tree.nodes[1], start + (farthest - start) * 0.3 / np.linalg.norm(
+        farthest - start), rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize('setting', ['2d', '3d-orient'])
 def test_the_goal_bias_aims_each_tree_at_the_other_trees_root(setting):
     """P_GOAL = 1: every iteration steps toward the other root, so each tree reaches it."""
     arm = arm_for_setting(setting)
