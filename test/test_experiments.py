@@ -302,6 +302,8 @@ def test_methods_parse_and_bad_ones_are_named():
     for bad, message in (('hard', 'needs its parameter'), ('rrt', 'unknown method'),
                          ('epsilon:x', 'not a number'), ('hard:2', 'outside'),
                          ('probabilistic::5', 'empty parameter'),
+                         ('probabilistic:', 'empty parameter'),
+                         ('informed:', 'empty parameter'),
                          ('probabilistic:inf', 'not finite'), ('hard:0.01:inf', 'not finite')):
         with pytest.raises(ValueError, match=message):
             Method.parse(bad)

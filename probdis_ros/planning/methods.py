@@ -100,10 +100,13 @@ class Method:
     @classmethod
     def parse(cls, text: str) -> Method:
         """Parse ``name[:value[:c_hard]]``; ValueError names what is wrong."""
-        name, _, rest = text.strip().partition(':')
+        name, colon, rest = text.strip().partition(':')
         value, _, c_hard = rest.partition(':')
         if name not in METHODS:
             raise ValueError(f'unknown method {name!r} in {text!r} ({_USAGE})')
+        if colon and not value and name in ('probabilistic', 'informed'):
+            # 'probabilistic:' read as bare: a value meant and lost gave the default silently
+            raise ValueError(f'{text!r}: an empty parameter ({_USAGE})')
         if name == 'informed':
             if c_hard:
                 raise ValueError(f'{text!r}: only hard takes a second parameter ({_USAGE})')
@@ -111,8 +114,6 @@ class Method:
         if not value:
             if name != 'probabilistic':
                 raise ValueError(f'{name} needs its parameter, e.g. {name}:0.01')
-            if rest:
-                raise ValueError(f'{text!r}: an empty parameter ({_USAGE})')
             return cls(name)
         if c_hard and name != 'hard':
             raise ValueError(f'{text!r}: only hard takes a second parameter ({_USAGE})')
