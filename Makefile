@@ -52,8 +52,9 @@ $(BENCH_STAMP): .ci/requirements/bench.txt $(STAMP)
 	@touch $(BENCH_STAMP)
 
 # The tests that use DDS (marked ros: real nodes, timed motions) run one at a time after the
-# others, which run in TEST_WORKERS processes (pytest-xdist): about 15 instead of 17-19 minutes
-# on two cores.  `pytest test` alone runs the whole suite in one process.
+# others, which run in TEST_WORKERS processes (pytest-xdist): 11-18 minutes on two cores as
+# this machine's speed drifts (CI, 2026-12-07).  `pytest test` alone runs the whole suite in
+# one process.  The DDS tests in two workers of their own failed under load (RESULTS).
 TEST_WORKERS ?= 2
 
 test: lint $(BENCH_STAMP)

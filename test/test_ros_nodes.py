@@ -489,7 +489,9 @@ def test_after_the_speed_monitoring_stops_the_arm_a_restart_resumes_with_the_map
     assert ros.call(f'/{MOCK_NODE}/restart_driver').success
     assert not ros.call(f'/{MOCK_NODE}/restart_driver').success   # running again
     held = np.array(arm.q)
-    assert np.abs(held - START).max() > 0.005       # it had moved before the stop
+    # it had moved before the stop, by more than the tolerance below tells apart (a mock
+    # that caught up after a stall tripped the monitoring 4.7 mrad out, in CI)
+    assert np.abs(held - START).max() > 0.003
     sent = len(ros.trajectories)
     arm.robot.command_speed_peak = 0.0
     if answer == 'stop':        # the operator's stop, no run active: a hold where the arm is
