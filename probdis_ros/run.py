@@ -206,6 +206,15 @@ class RunSettings:
 #: [s] a stamped message ends at least this long after its stamp (a hold at its last point)
 STAMP_HORIZON = 1.0
 
+#: [s] a stamped motion from a command that stands still first holds it this long.  JTC
+#: takes a message late by its timing, its delivery and any stall of this host (a CI run
+#: stalled 0.12 s), and runs it from its stamp: taken that late, a path started 0.12 s into
+#: its ramp, JTC's command at 1.4 x a joint's velocity limit for a period (scaling 0.2);
+#: taken within the hold, it does not move.  Its cost: each such path starts this much
+#: later.  A stop is not held (it must act at once), so one taken late still steps: on
+#: demo_hook, 1.0 x at 0.1 s late (JTC ran on with the old command meanwhile).
+STAMP_LEAD = 0.1
+
 
 def stamped(command: TrajectoryCommand, now: float, desired: bool) -> TrajectoryCommand:
     """
@@ -726,6 +735,10 @@ class Run:
         q, v, a = self.trajectory.sample(now - self.sent_at)
         return np.clip(q, self.arm.lower, self.arm.upper), v, a
 
+    def _command_holds(self, now: float) -> bool:
+        """Tell whether JTC's command stands still at now: its last message has ended."""
+        return self.trajectory is None or now - self.sent_at >= self.trajectory.duration
+
     def _held(self) -> bool:
         """
         Tell whether the arm is held by what blocked it, short of JTC's command.
@@ -859,6 +872,9 @@ class Run:
         """
         now = self._time() if planned_at is None else planned_at
         last = self._last_command(now)
+        if self._desired_start and self._command_holds(now) and not motion.velocities[0].any() \
+                and not motion.accelerations[0].any():
+            motion = motion.held_first(STAMP_LEAD)
         command = stamped(self._message(motion), now, self._desired_start)
         self._emit(Send(command, path, now))
         self.motion = motion

@@ -205,6 +205,27 @@ def test_a_path_from_an_arm_that_still_creeps_brakes_it_first():
         np.testing.assert_array_equal(motion.positions[0], q)
 
 
+def test_a_motion_from_rest_held_first_waits_whole_periods_at_its_start_then_runs_as_before():
+    q = np.array([0.3, 0.2, 0.0, -1.1, 0.0, 0.6, 0.0])
+    motion = time_parameterize(np.array([q, q + 0.3, q - 0.1]))
+    held = motion.held_first(0.095)                 # rounded up: 10 periods
+    assert held.times[:2] == pytest.approx([0.0, 10 * H])
+    np.testing.assert_allclose(held.times[1:], motion.times + 10 * H)
+    np.testing.assert_allclose(held.via_times, motion.via_times + 10 * H)
+    for name in ('positions', 'velocities', 'accelerations'):
+        np.testing.assert_array_equal(getattr(held, name)[1:], getattr(motion, name))
+    np.testing.assert_array_equal(held.positions[0], q)
+    for t in (0.0, 0.04, 10 * H):                   # still throughout the hold
+        position, velocity, _ = held.sample(t)
+        np.testing.assert_array_equal(position, q)
+        assert not velocity.any()
+    np.testing.assert_allclose(held.sample(10 * H + 0.2)[0], motion.sample(0.2)[0])
+    assert motion.held_first(0.0) is motion
+    creeping = from_state(q, np.full(N, 0.01), np.array([q, q + 0.3]))
+    with pytest.raises(ValueError, match='from rest'):
+        creeping.held_first(0.1)
+
+
 def test_a_stop_at_rest_is_a_one_point_hold():
     q = np.array([0.1, 0.2, 0.3, -0.4, 0.5, 0.6, 0.7])
     command = stop(q, np.zeros(N), np.zeros(N)).command

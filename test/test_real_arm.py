@@ -182,3 +182,48 @@ def test_a_desired_start_never_steps_the_command_where_a_measured_start_does(
         peaks[start] = episode.command_speed_peak, episode.sent_speed_peak
     assert peaks['measured'][0] > 5.0 and peaks['measured'][1] <= 1.0 + 1e-9
     assert max(peaks['desired']) <= RELEASE_SCALING + 1e-6
+
+
+@pytest.mark.parametrize('lead', ['held', 'none'])
+def test_a_path_from_a_still_command_that_jtc_takes_late_starts_without_a_step(
+        lead, monkeypatch):
+    # with a desired start a path is stamped with the time it was planned from, and JTC
+    # runs it from that stamp: taken 0.12 s late (this host stalled that long in a CI run)
+    # it started 0.12 s into its ramp, JTC's command 1.2 x A1's velocity limit for a
+    # period; each path from a command that stands still first holds it STAMP_LEAD
+    from probdis_ros import run as run_module
+    from probdis_ros.planning import Method
+    from probdis_ros.resources import scenario_path
+    from probdis_ros.run import PlanFrom, Run, Send
+    from probdis_ros.sim.worlds import load_world
+
+    if lead == 'none':
+        monkeypatch.setattr(run_module, 'STAMP_LEAD', 0.0)
+    goal = load_world(scenario_path('demo_iiwa')).goal
+    robot, _ = build_robot('kinematic', 'demo_iiwa', RobotSettings(command_latency=0.12))
+    for _ in range(30):                 # a stamp of 0 is none: the run starts at 0.3 s
+        robot.step()
+    method = Method.resolve('probabilistic')
+    loop = method.disentangler(ARM, method.planner(ARM, RRTSettings()), goal,
+                               method.failure_map(ARM.task_space), max_paths=2, seed=0)
+    run = Run(ARM, loop, RunSettings(jtc_start='desired'))
+    state = robot.joint_state()
+    run.start(state.time, state.position)
+    sent = []
+    while run.active and robot.time < 1.5:
+        while run.actions:
+            action = run.actions.pop(0)
+            if isinstance(action, Send):
+                sent.append(action.command)
+                robot.command(action.command)
+            elif isinstance(action, PlanFrom):
+                run.on_plan(loop.next_path(action.config))
+        robot.step()
+        state = robot.joint_state()
+        run.on_joint_state(state.time, state.position, state.velocity)
+    assert len(sent) == 1 and sent[0].stamp > 0      # one stamped path, still under way
+    assert np.abs(robot.joint_state().position - sent[0].positions[0]).max() > 0.05
+    if lead == 'held':
+        assert robot.command_speed_peak <= 0.25      # velocity_scaling 0.2
+    else:
+        assert robot.command_speed_peak > 1.0

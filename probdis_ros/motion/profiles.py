@@ -29,7 +29,7 @@ Stops decelerate from the commanded state with ruckig's velocity interface: neve
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cache
 import math
 from typing import TYPE_CHECKING
@@ -170,6 +170,27 @@ class Motion:
     def duration(self) -> float:
         """Return when the motion is at rest at its end [s]."""
         return float(self.times[-1])
+
+    def held_first(self, hold: float) -> Motion:
+        """
+        Return this motion (from rest) begun after holding its start for ``hold`` [s].
+
+        Rounded up to whole periods.  A stamped message that JTC takes up to ``hold`` late
+        then starts inside the hold, where its command stands still; taken late into the
+        move itself, the command would step ahead to catch up with the stamp's time line.
+        """
+        if not (np.all(self.velocities[0] == 0) and np.all(self.accelerations[0] == 0)):
+            raise ValueError('only a motion from rest can hold its start')
+        steps = int(np.ceil(hold / self.period - 1e-9))
+        if steps <= 0:
+            return self
+        shift = steps * self.period
+        at_rest = np.zeros((1, self.positions.shape[1]))
+        return replace(self, times=np.concatenate([[0.0], shift + self.times]),
+                       positions=np.vstack([self.positions[:1], self.positions]),
+                       velocities=np.vstack([at_rest, self.velocities]),
+                       accelerations=np.vstack([at_rest, self.accelerations]),
+                       via_times=shift + self.via_times)
 
     @property
     def command(self) -> TrajectoryCommand:
