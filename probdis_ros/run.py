@@ -736,8 +736,8 @@ class Run:
         return np.clip(q, self.arm.lower, self.arm.upper), v, a
 
     def _command_holds(self, now: float) -> bool:
-        """Tell whether JTC's command stands still at now: its last message has ended."""
-        return self.trajectory is None or now - self.sent_at >= self.trajectory.duration
+        """Tell whether JTC's command stands still at now: its last message has come to rest."""
+        return self.trajectory is None or now - self.sent_at >= self.trajectory.still_from
 
     def _held(self) -> bool:
         """

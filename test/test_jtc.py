@@ -113,6 +113,21 @@ def test_after_the_last_point_the_controller_holds_it():
     assert traj.duration == 1.0 and traj.segment_at(0.5) == 0 and traj.segment_at(9) == 0
 
 
+def test_the_command_stands_still_from_the_first_point_of_its_closing_hold():
+    # a stamped stop ends with a hold to STAMP_HORIZON: the command stands still from the
+    # stop's end, not the hold's, and a point passed on the way (at rest or not) is no end
+    stop = one_joint([0.0, 0.1, 0.2, 0.3, 1.0], [0.0, 0.1, 0.2, 0.2, 0.2],
+                     [0.0, 1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 0.0, 0.0], stamp=5.0)
+    assert JtcTrajectory(stop, np.zeros(1), taken_at=5.0).still_from == pytest.approx(0.2)
+    assert JtcTrajectory(stop, np.zeros(1), taken_at=4.9).still_from == pytest.approx(0.3)
+    through = one_joint([0.1, 0.2, 0.3], [0.2, 0.1, 0.2], [0.0, 0.0, 0.0])
+    assert JtcTrajectory(through, np.zeros(1)).still_from == pytest.approx(0.3)
+    creeping = one_joint([0.1, 0.2], [0.2, 0.2], [0.01, 0.0])
+    assert JtcTrajectory(creeping, np.zeros(1)).still_from == pytest.approx(0.2)
+    hold = one_joint([0.1, 0.2], [0.2, 0.2])          # positions only: linear, no motion
+    assert JtcTrajectory(hold, np.zeros(1)).still_from == pytest.approx(0.1)
+
+
 def test_segments_count_from_the_measured_start():
     traj = JtcTrajectory(one_joint([1.0, 2.0, 3.0], [1.0, 2.0, 3.0]), np.zeros(1))
     assert [traj.segment_at(t) for t in (0.0, 0.99, 1.0, 2.5, 3.5)] == [0, 0, 1, 2, 2]

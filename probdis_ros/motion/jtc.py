@@ -237,6 +237,22 @@ class JtcTrajectory:
         return interpolate(t - times[k], times[k + 1] - times[k], self._point(k),
                            self._point(k + 1))
 
+    @property
+    def still_from(self) -> float:
+        """
+        Return when the command comes to rest for good, relative to taken_at [s].
+
+        At the first of the points that close the message at its last position and at rest:
+        a stamped message ends with a hold (``STAMP_HORIZON`` after its stamp), in which the
+        command already stands still.
+        """
+        last = self.command.positions[-1]
+        k = len(self.times) - 1
+        while k > 0 and np.array_equal(self.command.positions[k - 1], last) and not any(
+                value is not None and np.any(value) for value in self._point(k - 1)[1:]):
+            k -= 1
+        return float(self.times[k])
+
     def peak_speed(self, start: float, end: float) -> np.ndarray:
         """
         Return per joint the largest speed at the message's points from start to end [s].
