@@ -203,6 +203,11 @@ class RunSettings:
                             lower=arm.lower, upper=arm.upper, cartesian=cartesian)
 
 
+#: What a run that nothing executes says of the lbr driver's guard, in releases that hold
+#: the arm instead of ending the session: tripped by a joint's speed it holds it for good.
+GUARD_HOLDS = ('a driver whose log says "Overriding invalid command to neutral command." holds '
+               'the arm until it is restarted')
+
 #: [s] a stamped message ends at least this long after its stamp (a hold at its last point)
 STAMP_HORIZON = 1.0
 
@@ -535,13 +540,13 @@ class Run:
         elif still_again:
             self.finish(State.STOPPED, f'{detector.reason}: the arm has moved under neither this '
                                        f'command nor the one before, both blocked: nothing '
-                                       f'executes the commands (is the controller active?) or '
-                                       f'something holds the arm on every side; stopped, this '
-                                       f'one not learned')
+                                       f'executes the commands (is the controller active? '
+                                       f'{GUARD_HOLDS}) or something holds the arm on every '
+                                       f'side; stopped, this one not learned')
         elif verdict is Verdict.NOT_EXECUTED:
             self.finish(State.STOPPED, f'{detector.reason}: nothing executes the commands (is '
-                                       f'the controller active?) or something holds the arm; '
-                                       f'stopped, nothing learned')
+                                       f'the controller active? {GUARD_HOLDS}) or something '
+                                       f'holds the arm; stopped, nothing learned')
         elif self.phase is Phase.EXECUTING:
             if verdict is Verdict.DONE:
                 self._completed(self.measured)

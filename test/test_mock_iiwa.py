@@ -103,11 +103,14 @@ def test_the_mock_hands_the_driver_and_controller_settings_to_its_arm(make):
     settings = arm.robot.settings
     assert settings.period == 1.0 / CONTROLLER_RATE     # the lbr stack's 100 Hz
     assert (settings.echo, settings.limiter, settings.jtc_start) == (False, True, 'measured')
+    assert not settings.guard_holds
     assert settings.torque_tau == DRIVER_TORQUE_TAU and arm.robot.limiter is not None
     arm = make(rate=250.0, echo=True, seed=5, enforce_command_limits=False,
                measured_torque_tau=0.2, command_latency=0.03, latency=0.01,
-               collision_torque=40.0, speed_monitor=0.3, interpolate_from_desired_state=True)
+               collision_torque=40.0, speed_monitor=0.3, interpolate_from_desired_state=True,
+               guard_holds=True)
     settings = arm.robot.settings
+    assert settings.guard_holds
     assert settings.period == 1.0 / 250.0 and settings.seed == 5
     assert (settings.echo, settings.limiter, settings.jtc_start) == (True, False, 'desired')
     assert arm.robot.limiter is None

@@ -227,3 +227,19 @@ def test_a_path_from_a_still_command_that_jtc_takes_late_starts_without_a_step(
         assert robot.command_speed_peak <= 0.25      # velocity_scaling 0.2
     else:
         assert robot.command_speed_peak > 1.0
+
+
+def test_a_run_whose_driver_guard_holds_the_arm_for_good_stops_and_says_where_to_look():
+    # messages 0.2 s late: the arm springs back from a block it pressed longer, at 1.34 rad/s
+    # on A4 (limit 1.31); a driver whose guard holds instead of ending the session then
+    # holds the arm for good while it runs and reports: the run sees nothing move under a
+    # path and a retreat and stops, naming the driver's log line
+    from probdis_ros.physics.family_scenes import family_scene_name
+    from probdis_ros.physics.simulated_robot import DRIVER_STOPPED
+
+    held = run_physics_episode(family_scene_name('clutter', 5002), 'informed', seed=0,
+                               robot_settings=RobotSettings(command_latency=0.2,
+                                                            guard_holds=True))
+    assert not held.success and DRIVER_STOPPED not in held.message
+    assert 'nothing executes the commands' in held.message
+    assert 'Overriding invalid command to neutral command.' in held.message

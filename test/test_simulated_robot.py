@@ -395,6 +395,61 @@ def test_the_command_guard_stops_the_driver_on_a_command_past_a_limit(side):
             assert robot.stopped is not None and 'A1 outside its limits' in robot.stopped
 
 
+@pytest.mark.parametrize('side', [1, -1])
+def test_a_guard_that_holds_sends_the_measured_position_past_a_limit_and_keeps_reporting(side):
+    # releases of the lbr stack that log "Overriding invalid command to neutral command."
+    # send the measured position in place of a command past a limit, each period, and the
+    # driver stays up: the arm stops short of the limit, its states keep coming
+    limit = ARM.upper[0] if side > 0 else ARM.lower[0]
+    robot, _ = build_robot('physics', free_scene(),
+                           RobotSettings(limiter=False, guard_holds=True))
+    beyond = robot.joint_state().position.copy()
+    beyond[0] = limit + side * 0.05
+    _, duration = command_to(robot, beyond, 0.5)
+    while robot.time < duration + 1.0:
+        robot.step()
+        assert side * robot.engine.q[0] <= side * limit
+    assert robot.stopped is None and 'A1 outside its limits' in robot.guard_trip
+    assert robot.joint_state().time == pytest.approx(robot.time)
+    assert robot.guard_trips > 50            # about every period the command stays past it
+    assert abs(robot.engine.q[0] - limit) < 0.01
+
+
+def test_a_holding_guard_tripped_by_a_measured_speed_freezes_the_arm_with_the_driver_up():
+    # the long edge at the full velocity limits, whose overshoot stops a driver that throws
+    # (above), trips a holding guard instead; its velocity check compares with the last
+    # position that passed, which it keeps while it fails, so the arm, held where it is,
+    # stays too far from it: the guard trips every period from then on and the arm stays
+    # frozen short of the goal, the driver up and reporting, until the driver is restarted
+    start, goal = measure.LONG_EDGE
+    free = replace(load_scene('demo_hook'), obstacles=(), start=start, goal=goal)
+    robot, _ = build_robot('physics', free, RobotSettings(guard_holds=True))
+    motion = measure._motion(np.array([start, goal]), 1.0)
+    robot.command(motion.command)
+    while robot.guard_trips == 0:
+        robot.step()
+    assert 'above its velocity limit' in robot.guard_trip
+    tripped = robot.guard_trips
+    for _ in range(100):                     # the arm's damping brings it to rest
+        robot.step()
+    frozen = robot.engine.q.copy()
+    while robot.time < motion.duration + 1.0:
+        robot.step()
+    assert robot.stopped is None and robot.guard_trips > tripped + 100
+    assert robot.joint_state().time == pytest.approx(robot.time)
+    np.testing.assert_allclose(robot.engine.q, frozen, atol=1e-3)
+    assert np.abs(robot.engine.q - goal).max() > 0.3
+    # the operator restarts the driver: its guard starts afresh and the arm moves again
+    robot.restart()
+    assert robot.guard_trips == 0
+    _, duration = command_to(robot, goal, 0.5)
+    end = robot.time + duration + 1.0
+    while robot.time < end:
+        robot.step()
+    assert robot.guard_trips == 0
+    np.testing.assert_allclose(robot.engine.q, goal, atol=0.01)
+
+
 def test_the_joint_limiter_ramps_the_step_of_a_new_command_at_the_velocity_limits():
     # the arm stopped dead by an obstacle while JTC's command runs on; a new command from the
     # measured state steps JTC's command back by the gap in one period, and without the

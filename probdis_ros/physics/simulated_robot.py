@@ -36,7 +36,11 @@ says why): from then on the arm holds where it is and no joint state is reported
 real driver that threw "invalid command" leaves it.  KUKA's own Cartesian speed monitoring
 (``speed_monitor`` [m/s], 0 by default: off; a safety configuration may set one, T1 means to
 keep 250 mm/s) stops it the same way when a point of the arm (its URDF collision shapes and
-the flange) moves faster: a safety stop ends the FRI session.
+the flange) moves faster: a safety stop ends the FRI session.  Some releases of the lbr
+stack's position command interface do not throw but log "Overriding invalid command to
+neutral command." (``guard_holds``): the guard checks each filtered command before it is
+sent, with the measured motion since the last period that passed, and sends the measured
+position instead of one that fails; the driver keeps running and reporting.
 
 What the driver measures is what JTC reads and what it reports: the arm's position (with the
 encoders' Gaussian ``noise``, if any) and, as the lbr stack's ``compute_hw_velocity_`` makes
@@ -164,6 +168,7 @@ class RobotSettings:
     command_latency: float = 0.0            # a command reaches JTC this long after it is sent [s]
     echo: bool = False                      # report the command sent, not the arm (open_loop)
     guard: bool = True                      # the driver's command guard stops it on a fault
+    guard_holds: bool = False               # ... or commands the measured position instead
     speed_monitor: float = 0.0              # KUKA's Cartesian speed monitoring [m/s]; 0: off
     collision_torque: float = 0.0           # KUKA's collision detection [Nm, a joint]; 0: off
     limiter: bool = True                    # ros2_control's joint limiter (CommandLimiter)
@@ -228,6 +233,10 @@ class SimulatedRobot:
         self.commanded = q.copy()             # JTC's last position command
         self._sent_before = q.copy()          # the driver's command one period earlier
         self.stopped: str | None = None       # why the driver's command guard stopped it
+        # guard_holds: the measured position its velocity check last passed, and its trips
+        self._guard_passed = self._driver_position()
+        self.guard_trips = 0
+        self.guard_trip: str | None = None    # why it tripped last
         self._stop_torque = np.zeros(len(q))  # the contacts' torques then [Nm]
         self._reported: deque[JointStateSample] = deque()
         # (when JTC gets it, the command) of messages still on their way (command_latency)
@@ -239,6 +248,9 @@ class SimulatedRobot:
         """
         Restart a stopped driver, as the operator does after a safety stop.
 
+        Also one whose holding guard has tripped (``guard_holds``), which a joint's speed
+        leaves holding the arm for good while the driver runs.
+
         The robot application and the driver come up again where the arm holds: JTC holds
         the measured position, no command of before survives, joint states flow again.
         RuntimeError if the driver runs, or if the robot application would refuse to
@@ -248,7 +260,7 @@ class SimulatedRobot:
         the stop pressing; the mock holds the stopped arm with its impedance, which lets
         the contact relax: so the torque at the stop counts, or now's if larger.
         """
-        if self.stopped is None:
+        if self.stopped is None and not self.guard_trips:
             raise RuntimeError('the driver is running: nothing to restart')
         external = np.maximum(self._stop_torque, self._external_torque())
         if external.max() > RESTART_TORQUE:
@@ -293,6 +305,8 @@ class SimulatedRobot:
         before = self.engine.q.copy()
         limited = self.commanded if self.limiter is None else self.limiter(self.commanded)
         sent = self.filter(limited)
+        if self.settings.guard and self.settings.guard_holds:
+            sent = self._guard_hold(sent)
         self.command_speed_peak = max(self.command_speed_peak,
                                       self._speed_over_limit(self.commanded - previous))
         self.sent_speed_peak = max(self.sent_speed_peak,
@@ -306,6 +320,43 @@ class SimulatedRobot:
                 self._stop_torque = self._external_torque()
                 return
         self._measure()
+
+    def _driver_position(self) -> np.ndarray:
+        """Return the position the driver measures now: the arm's, or in open loop its command."""
+        return self.filter.value.copy() if self.settings.echo else self.engine.q.copy()
+
+    def _guard_hold(self, sent: np.ndarray) -> np.ndarray:
+        """
+        Return the command the driver sends this period, its guard holding where it trips.
+
+        The lbr stack's releases that log "Overriding invalid command to neutral command."
+        check the filtered command against the position limits and the measured motion
+        since the last period that passed (velocity limits) before they send it, and send
+        the measured position instead of a command that fails; the filter goes on from
+        there.  The driver keeps running, and its joint states keep coming.
+        """
+        # in open loop the driver measures the command it sent the period before
+        measured = self._sent_before.copy() if self.settings.echo else self.engine.q.copy()
+        limits = self._limits
+        reason = None
+        outside = (sent < limits.lower) | (sent > limits.upper)
+        speed = np.abs(measured - self._guard_passed) / self.settings.period
+        over = speed / limits.velocity_limits
+        if outside.any():
+            joint = int(np.argmax(outside))
+            reason = f'position command of A{joint + 1} outside its limits ({sent[joint]:.4f} rad)'
+        elif over.max() > 1.0 + 1e-9:
+            joint = int(np.argmax(over))
+            reason = (f'A{joint + 1} measured at {speed[joint]:.2f} rad/s, above its velocity '
+                      f'limit {limits.velocity_limits[joint]:.2f} rad/s')
+        else:
+            self._guard_passed = measured
+        if reason is None:
+            return sent
+        self.guard_trips += 1
+        self.guard_trip = reason
+        self.filter.reset(measured)
+        return measured
 
     def _speed_over_limit(self, change: np.ndarray) -> float:
         speed = np.abs(change) / self.settings.period
@@ -328,7 +379,7 @@ class SimulatedRobot:
                 return (f"KUKA's collision detection: an external torque of "
                         f'{torque[joint]:.1f} Nm at A{joint + 1}, above {limit:g} Nm (a safety '
                         f'stop)')
-        if not self.settings.guard:
+        if not self.settings.guard or self.settings.guard_holds:
             return None
         limits = self._limits
         outside = (sent < limits.lower) | (sent > limits.upper)

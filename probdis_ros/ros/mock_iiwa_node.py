@@ -116,6 +116,11 @@ class MockIiwa(Node):
             "the driver's first-order filter of the measured joint torques before they are "
             "published [s] (the lbr stack's parameter of that name; 0: none)", 0.0, 10.0))
         p('echo', False, _describe('report the commanded position (a driver in open loop)'))
+        p('guard_holds', False, _describe(
+            "the driver's command guard sends the measured position in place of a command it "
+            'refuses and the driver runs on, as lbr releases that log "Overriding invalid '
+            'command to neutral command." do (false: it stops the driver, as releases that '
+            'throw "Invalid command." do)'))
         p('speed_monitor', 0.0, _describe(
             "KUKA's Cartesian speed monitoring [m/s]: a point of the arm (URDF collision "
             'shapes, flange) faster stops it, as a safety stop ends the FRI session (T1 means '
@@ -171,6 +176,7 @@ class MockIiwa(Node):
         settings, physics = with_faults(
             {name: value(name) for name in FAULTS},
             RobotSettings(period=1.0 / value('rate'), echo=value('echo'), seed=value('seed'),
+                          guard_holds=value('guard_holds'),
                           limiter=value('enforce_command_limits'),
                           torque_tau=value('measured_torque_tau'),
                           jtc_start='desired' if value('interpolate_from_desired_state')
@@ -187,6 +193,7 @@ class MockIiwa(Node):
         self.wall_start = time.monotonic()
         self.ticking = False            # wall_start and epoch move to the first tick
         self.driver_down = False        # the command guard stopped the driver
+        self.guard_trips = 0            # its trips said (guard_holds)
         self.pub = self.create_publisher(JointState, value('joint_states_topic'),
                                          qos_profile_sensor_data)
         self.clock_pub = self.create_publisher(Clock, '/clock', 10) if self.sim_time else None
@@ -224,6 +231,7 @@ class MockIiwa(Node):
             response.success, response.message = False, str(refused)
             return response
         self.driver_down = False
+        self.guard_trips = 0
         response.success = True
         response.message = f'driver restarted at {np.round(self.q, 3).tolist()}'
         self.get_logger().info(response.message)
@@ -299,6 +307,11 @@ class MockIiwa(Node):
                 self.get_logger().error(f'the command guard stopped the driver: '
                                         f'{self.robot.stopped}; no more joint states')
             return
+        if self.robot.guard_trips > self.guard_trips:
+            self.guard_trips = self.robot.guard_trips
+            self.get_logger().warning(f'the command guard overrode an invalid command with the '
+                                      f'measured position: {self.robot.guard_trip}',
+                                      throttle_duration_sec=1.0)
         if steps:
             self._publish(self.robot.joint_state())
 
