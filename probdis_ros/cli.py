@@ -459,7 +459,7 @@ def cmd_experiment_robot(args: argparse.Namespace) -> int:
                                    offline=args.offline, detection=detection,
                                    jtc_start=args.jtc_start, faults=faults,
                                    cartesian_speed_limit=_cartesian_speed(args),
-                                   restarts=args.restarts)
+                                   restarts=args.restarts, guard_holds=args.guard_holds)
     # the runs asked for only: a DIR may hold more runs (an earlier --runs), other scenes
     # or methods
     wanted = {(s, str(m), r) for s in scenarios for m in methods for r in range(runs)}
@@ -1479,6 +1479,11 @@ def build_parser() -> argparse.ArgumentParser:
                        "guard, KUKA's speed monitoring), restart it and start the planner "
                        'again, as an operator would, at most N times per run (its map kept; '
                        'all starts together plan at most 20 paths; default 0)')
+    robot.add_argument('--guard-holds', action='store_true',
+                       help="the mock driver's command guard sends the measured position in "
+                       'place of a command it refuses and runs on, as lbr releases that log '
+                       '"Overriding invalid command to neutral command." do (default: it '
+                       'stops the driver)')
     robot.add_argument('--against', metavar='DIR', help='compare with the same runs in '
                        "another experiment's DIR (another setting, fault or commit): paired "
                        'by scene, method and run, with a bootstrap interval')

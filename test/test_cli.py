@@ -381,8 +381,9 @@ def test_an_offline_run_that_fails_is_tried_again_offline(tmp_path, monkeypatch,
     calls = []
 
     def flaky(scenario, method, run, velocity_scaling, detection, jtc_start, faults,
-              cartesian_speed_limit, restarts):
-        calls.append((scenario, str(method), run, faults, cartesian_speed_limit, restarts))
+              cartesian_speed_limit, restarts, guard_holds):
+        calls.append((scenario, str(method), run, faults, cartesian_speed_limit, restarts,
+                      guard_holds))
         if len(calls) == 1:
             raise RuntimeError('the simulation did not start')
         return {'success': True, 'paths': 2, 'failures': 1, 'bag': None}
@@ -391,18 +392,20 @@ def test_an_offline_run_that_fails_is_tried_again_offline(tmp_path, monkeypatch,
     status = cli.main(['experiment', 'robot', '--offline', '--runs', '1', '--scenarios',
                        'demo_hook', '--methods', 'informed:af', '--out', str(tmp_path),
                        '--fault', 'latency=0.02', '--cartesian-speed-limit', '0.2',
-                       '--restarts', '2', '--json'])
+                       '--restarts', '2', '--guard-holds', '--json'])
     faults = {'latency': 0.02}
-    assert status == 0 and calls == [('demo_hook', 'informed:af', 0, faults, 0.2, 2)] * 2
+    assert status == 0 and calls == [('demo_hook', 'informed:af', 0, faults, 0.2, 2, True)] * 2
     records = json.loads(capsys.readouterr().out)
     assert [(r['success'], r['offline'], r['faults'], r['cartesian_speed_limit'],
-             r['restarts']) for r in records] == [(True, True, faults, 0.2, 2)]
+             r['restarts'], r['guard_holds']) for r in records] == [(True, True, faults, 0.2, 2,
+                                                                    True)]
     # a directory of runs with other faults is refused, naming them
     status = cli.main(['experiment', 'robot', '--offline', '--runs', '1', '--scenarios',
                        'demo_hook', '--methods', 'informed:af', '--out', str(tmp_path)])
     err = capsys.readouterr().err
     assert status == 2 and "faults {'latency': 0.02}, not {}" in err
     assert 'cartesian_speed_limit 0.2, not 0.0' in err and 'restarts 2, not 0' in err
+    assert 'guard_holds True, not False' in err
 
 
 def test_the_robot_table_counts_only_the_runs_asked_for(tmp_path, monkeypatch, capsys):
@@ -457,7 +460,7 @@ def test_a_robot_run_of_the_bare_informed_of_before_is_run_again(
     calls = []
 
     def offline(scenario, method, run, velocity_scaling, detection, jtc_start, faults,
-                cartesian_speed_limit, restarts):
+                cartesian_speed_limit, restarts, guard_holds):
         calls.append((scenario, str(method), run))
         return {'success': True, 'paths': 2, 'failures': 1, 'bag': None}
 

@@ -111,7 +111,8 @@ PHYSICS_FIGURES = ('message', 'peak_contact_force_n', 'peak_table_force_n', 'low
 def offline_run(scenario: str, method: Method, run: int, velocity_scaling: float,
                 detection: dict[str, float], jtc_start: str = DEFAULT_JTC_START,
                 faults: dict[str, float] | None = None,
-                cartesian_speed_limit: float = 0.0, restarts: int = 0) -> dict:
+                cartesian_speed_limit: float = 0.0, restarts: int = 0,
+                guard_holds: bool = False) -> dict:
     """
     Run one disentangling without DDS: the planner node's Run against JTC, filter and MuJoCo.
 
@@ -120,7 +121,9 @@ def offline_run(scenario: str, method: Method, run: int, velocity_scaling: float
     nodes cannot keep up.  ``faults``: the mock's
     (:data:`~probdis_ros.physics.simulated_robot.FAULTS`), as its node takes them;
     ``restarts``: how often the operator restarts a driver that stopped the arm and starts
-    the planner again (:func:`~probdis_ros.physics.episode.run_physics_episode`).
+    the planner again (:func:`~probdis_ros.physics.episode.run_physics_episode`);
+    ``guard_holds``: the driver's guard sends the measured position and runs on
+    (``RobotSettings.guard_holds``).
     """
     from probdis_ros.motion.detector import DetectorSettings
     from probdis_ros.physics.episode import run_physics_episode
@@ -130,7 +133,8 @@ def offline_run(scenario: str, method: Method, run: int, velocity_scaling: float
     settings = RunSettings(velocity_scaling=velocity_scaling,
                            detection=DetectorSettings(**detection), jtc_start=jtc_start,
                            cartesian_speed_limit=cartesian_speed_limit)
-    robot, physics = with_faults(faults or {}, RobotSettings(jtc_start=jtc_start, seed=run))
+    robot, physics = with_faults(faults or {}, RobotSettings(jtc_start=jtc_start, seed=run,
+                                                             guard_holds=guard_holds))
     episode = run_physics_episode(scenario, str(method), seed=run, run_settings=settings,
                                   robot_settings=robot, physics_settings=physics,
                                   restarts=restarts)
@@ -141,10 +145,10 @@ def offline_run(scenario: str, method: Method, run: int, velocity_scaling: float
 
 
 #: The value of a run setting (engine, velocity_scaling, offline, detection, jtc_start,
-#: faults, cartesian_speed_limit, restarts) in records written before it was kept (none: not
-#: compared).
+#: faults, cartesian_speed_limit, restarts, guard_holds) in records written before it was
+#: kept (none: not compared).
 LEGACY_SETTINGS = {'offline': False, 'detection': {}, 'jtc_start': 'measured', 'faults': {},
-                   'cartesian_speed_limit': 0.0, 'restarts': 0}
+                   'cartesian_speed_limit': 0.0, 'restarts': 0, 'guard_holds': False}
 
 
 def check_settings(path: Path, records: list[dict], settings: dict) -> None:
@@ -171,7 +175,8 @@ def run_robot_experiment(out: Path, scenarios: list[str], methods: list[Method],
                          detection: dict[str, float] | None = None,
                          jtc_start: str = DEFAULT_JTC_START,
                          faults: dict[str, float] | None = None,
-                         cartesian_speed_limit: float = 0.0, restarts: int = 0) -> list[dict]:
+                         cartesian_speed_limit: float = 0.0, restarts: int = 0,
+                         guard_holds: bool = False) -> list[dict]:
     """
     Run what is missing of scenarios x methods x runs; return every record of DIR.
 
@@ -183,7 +188,9 @@ def run_robot_experiment(out: Path, scenarios: list[str], methods: list[Method],
     ``faults`` are the mock's (by the names of
     :data:`~probdis_ros.physics.simulated_robot.FAULTS`) in every run;
     ``cartesian_speed_limit`` [m/s] is the planner's (0: off); ``restarts`` (offline only)
-    how often a driver that stopped the arm is restarted and the planner started again.
+    how often a driver that stopped the arm is restarted and the planner started again;
+    ``guard_holds``: the mock driver's guard sends the measured position in place of a
+    command it refuses and runs on, as some lbr releases do.
     """
     if restarts and not offline:
         raise ValueError('restarts are simulated offline only (the mock node does not '
@@ -192,7 +199,8 @@ def run_robot_experiment(out: Path, scenarios: list[str], methods: list[Method],
     faults = dict(faults or {})
     settings = {'engine': engine, 'velocity_scaling': velocity_scaling, 'offline': offline,
                 'detection': detection, 'jtc_start': jtc_start, 'faults': faults,
-                'cartesian_speed_limit': cartesian_speed_limit, 'restarts': restarts}
+                'cartesian_speed_limit': cartesian_speed_limit, 'restarts': restarts,
+                'guard_holds': guard_holds}
 
     out.mkdir(parents=True, exist_ok=True)
     path = out / RUNS_FILE
@@ -209,14 +217,16 @@ def run_robot_experiment(out: Path, scenarios: list[str], methods: list[Method],
         """Run once, offline or through the nodes: a retry goes the same way."""
         if offline:     # any method: no planner node, whose parameters limit it
             return offline_run(scenario, method, run, velocity_scaling, detection, jtc_start,
-                               faults, cartesian_speed_limit, restarts)
+                               faults, cartesian_speed_limit, restarts, guard_holds)
         from probdis_ros.ros.demo import run_demo
 
         args = (*planner_arguments(method, run, velocity_scaling),
                 *float_arguments({**detection, 'cartesian_speed_limit': cartesian_speed_limit}),
                 '-p', f'bag_dir:={out / "bags"}')
         return run_demo(scenario, timeout, quiet=True, extra_planner_args=args,
-                        extra_mock_args=tuple(float_arguments(faults)), jtc_start=jtc_start,
+                        extra_mock_args=(*float_arguments(faults),
+                                         *(('-p', 'guard_holds:=true') if guard_holds else ())),
+                        jtc_start=jtc_start,
                         **world_args)
 
     with path.open('a') as stream:
@@ -237,7 +247,8 @@ def run_robot_experiment(out: Path, scenarios: list[str], methods: list[Method],
                       'failures': result['failures'], 'wall_s': time.monotonic() - t0,
                       'bag': result['bag'], 'offline': offline, 'detection': detection,
                       'jtc_start': jtc_start, 'faults': faults,
-                      'cartesian_speed_limit': cartesian_speed_limit, 'restarts': restarts}
+                      'cartesian_speed_limit': cartesian_speed_limit, 'restarts': restarts,
+                'guard_holds': guard_holds}
             for name in PHYSICS_FIGURES:
                 if name in result:
                     record[name] = result[name]
