@@ -248,7 +248,7 @@ def run_robot_experiment(out: Path, scenarios: list[str], methods: list[Method],
                       'bag': result['bag'], 'offline': offline, 'detection': detection,
                       'jtc_start': jtc_start, 'faults': faults,
                       'cartesian_speed_limit': cartesian_speed_limit, 'restarts': restarts,
-                'guard_holds': guard_holds}
+                      'guard_holds': guard_holds}
             for name in PHYSICS_FIGURES:
                 if name in result:
                     record[name] = result[name]
