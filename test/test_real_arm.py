@@ -30,10 +30,29 @@ from probdis_ros.physics import load_scene, measure, PhysicsIiwa, PhysicsSetting
 from probdis_ros.physics.episode import run_physics_episode
 from probdis_ros.physics.simulated_robot import build_robot, RobotSettings, SimulatedRobot
 from probdis_ros.planning.prob_rrt import RRTSettings
-from probdis_ros.run import ECHO_MESSAGE, RELEASE_SCALING, RunSettings
+from probdis_ros.run import ECHO_MESSAGE, PlanFrom, RELEASE_SCALING, Run, RunSettings, Send
 import pytest
 
 ARM = iiwa_arm()
+
+
+def drive(run, loop, robot, until: float) -> list:
+    """Start a run where the robot is and drive it to its end or until; return what it sent."""
+    state = robot.joint_state()
+    run.start(state.time, state.position)
+    sent = []
+    while run.active and robot.time < until:
+        while run.actions:
+            action = run.actions.pop(0)
+            if isinstance(action, Send):
+                sent.append(action.command)
+                robot.command(action.command)
+            elif isinstance(action, PlanFrom):
+                run.on_plan(loop.next_path(action.config))
+        robot.step()
+        state = robot.joint_state()
+        run.on_joint_state(state.time, state.position, state.velocity)
+    return sent
 
 
 @pytest.mark.parametrize('scene', ['demo_hook', 'robot_bunny'])
@@ -140,7 +159,6 @@ def test_an_arm_that_lags_more_than_motion_delay_is_not_taken_for_an_echo():
     # runs of seeds 3 and 4 stopped as "echo" (the echo is judged on the time sent now)
     from probdis_ros.planning import Method
     from probdis_ros.resources import scenario_path
-    from probdis_ros.run import PlanFrom, Run, Send
     from probdis_ros.sim.worlds import load_world
 
     goal = load_world(scenario_path('demo_iiwa')).goal
@@ -152,18 +170,7 @@ def test_an_arm_that_lags_more_than_motion_delay_is_not_taken_for_an_echo():
                                    goal, method.failure_map(ARM.task_space), max_paths=6,
                                    seed=seed, goal_tolerance=0.04)
         run = Run(ARM, loop, RunSettings(velocity_scaling=0.7, detection=detection))
-        state = robot.joint_state()
-        run.start(state.time, state.position)
-        while run.active and robot.time < 60.0:
-            while run.actions:
-                action = run.actions.pop(0)
-                if isinstance(action, Send):
-                    robot.command(action.command)
-                elif isinstance(action, PlanFrom):
-                    run.on_plan(loop.next_path(action.config))
-            robot.step()
-            state = robot.joint_state()
-            run.on_joint_state(state.time, state.position, state.velocity)
+        drive(run, loop, robot, 60.0)
         assert run.message != ECHO_MESSAGE, seed
 
 
@@ -194,7 +201,6 @@ def test_a_path_from_a_still_command_that_jtc_takes_late_starts_without_a_step(
     from probdis_ros import run as run_module
     from probdis_ros.planning import Method
     from probdis_ros.resources import scenario_path
-    from probdis_ros.run import PlanFrom, Run, Send
     from probdis_ros.sim.worlds import load_world
 
     if lead == 'none':
@@ -207,20 +213,7 @@ def test_a_path_from_a_still_command_that_jtc_takes_late_starts_without_a_step(
     loop = method.disentangler(ARM, method.planner(ARM, RRTSettings()), goal,
                                method.failure_map(ARM.task_space), max_paths=2, seed=0)
     run = Run(ARM, loop, RunSettings(jtc_start='desired'))
-    state = robot.joint_state()
-    run.start(state.time, state.position)
-    sent = []
-    while run.active and robot.time < 1.5:
-        while run.actions:
-            action = run.actions.pop(0)
-            if isinstance(action, Send):
-                sent.append(action.command)
-                robot.command(action.command)
-            elif isinstance(action, PlanFrom):
-                run.on_plan(loop.next_path(action.config))
-        robot.step()
-        state = robot.joint_state()
-        run.on_joint_state(state.time, state.position, state.velocity)
+    sent = drive(run, loop, robot, 1.5)
     assert len(sent) == 1 and sent[0].stamp > 0      # one stamped path, still under way
     assert np.abs(robot.joint_state().position - sent[0].positions[0]).max() > 0.05
     if lead == 'held':
