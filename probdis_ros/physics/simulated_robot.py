@@ -234,7 +234,7 @@ class SimulatedRobot:
         self._sent_before = q.copy()          # the driver's command one period earlier
         self.stopped: str | None = None       # why the driver's command guard stopped it
         # guard_holds: the measured position its velocity check last passed, and its trips
-        self._guard_passed = self._driver_position()
+        self._guard_passed = q.copy()
         self.guard_trips = 0
         self.guard_trip: str | None = None    # why it tripped last
         self._stop_torque = np.zeros(len(q))  # the contacts' torques then [Nm]
@@ -320,10 +320,6 @@ class SimulatedRobot:
                 self._stop_torque = self._external_torque()
                 return
         self._measure()
-
-    def _driver_position(self) -> np.ndarray:
-        """Return the position the driver measures now: the arm's, or in open loop its command."""
-        return self.filter.value.copy() if self.settings.echo else self.engine.q.copy()
 
     def _guard_hold(self, sent: np.ndarray) -> np.ndarray:
         """
