@@ -278,7 +278,7 @@ def test_the_client_reads_and_sets_parameters_keeping_their_type(ros):
         assert client.set_parameter('velocity_scaling', 1) == \
             (False, 'velocity_scaling in [0.01, 0.7]')
         assert client.set_parameter('goal', [0, 1, 0, 0, 0, 0, 0])[0]
-        assert planner.node.get_parameter('goal').value == [0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+        assert list(planner.node.get_parameter('goal').value) == [0.0, 1.0] + [0.0] * 5
         names = client.parameter_names()
         assert names == sorted(names) and {'goal', 'velocity_scaling'} <= set(names)
 
@@ -301,8 +301,11 @@ def test_the_client_waits_for_a_newer_status_and_else_gives_the_latest(ros):
         assert time.monotonic() - began < 3.0
         # a start whose answer was lost took effect if the status shows a run, or its end
         planner.publish('gave_up')
+        assert client.status(timeout=5.0, newer_than={'state': 'planning'}) == \
+            {'state': 'gave_up'}
         assert demo._started(client, wait=3.0)
         planner.publish('idle')
+        assert client.status(timeout=5.0, newer_than={'state': 'gave_up'}) == idle
         assert not demo._started(client, wait=0.5)
 
 
