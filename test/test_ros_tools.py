@@ -362,3 +362,20 @@ def test_the_player_reports_the_damage_of_a_cut_bag(ros, tmp_path):
     result = play(str(bag), wait=0.0, progress=False)
     assert 0 < result.published < 20
     assert result.damage and 'cut.mcap is damaged at byte' in result.damage
+
+
+@pytest.mark.ros
+def test_a_planner_that_comes_up_late_still_has_the_time_to_answer(ros):
+    # the timeout counts twice: for the service to come up, then for its answer; a planner
+    # found late in the first must not be cut off in the second (a start it then ran would
+    # be reported as not answered)
+    node = ros.add(rclpy.create_node('probdis_planner', context=ros.context))
+
+    def reset_map(request, response):
+        time.sleep(1.0)
+        response.success, response.message = True, 'cleared 0 failures'
+        return response
+
+    threading.Timer(1.0, node.create_service, (Trigger, '~/reset_map', reset_map)).start()
+    with PlannerClient() as client:
+        assert client.call('reset_map', timeout=2.0) == (True, 'cleared 0 failures')
