@@ -381,3 +381,21 @@ def test_a_planner_that_comes_up_late_still_has_the_time_to_answer(ros):
     threading.Timer(1.0, node.create_service, (Trigger, '~/reset_map', reset_map)).start()
     with PlannerClient() as client:
         assert client.call('reset_map', timeout=2.0) == (True, 'cleared 0 failures')
+
+
+def test_a_robot_experiment_killed_while_writing_a_run_resumes(tmp_path, monkeypatch):
+    # Ctrl-C while a run's record was being written leaves half a line: the resumed
+    # experiment must write its runs on lines of their own, or the next resume fails on a
+    # damaged line in the middle of the file
+    from probdis_ros.planning import Method
+
+    calls, run_demo = fake_run('')
+    monkeypatch.setattr(demo, 'run_demo', run_demo)
+    methods = [Method.parse('probabilistic')]
+    run_robot_experiment(tmp_path, ['demo_hook'], methods, 1)
+    runs = tmp_path / 'robot_runs.jsonl'
+    runs.write_text(runs.read_text() + '{"scenario": "demo_hook", "meth')
+    records = run_robot_experiment(tmp_path, ['demo_hook'], methods, 2)
+    assert [r['run'] for r in records] == [0, 1]
+    records = run_robot_experiment(tmp_path, ['demo_hook'], methods, 2)
+    assert [r['run'] for r in records] == [0, 1] and len(calls) == 2
