@@ -141,7 +141,7 @@ def test_a_robot_run_hands_the_nodes_its_settings_and_checks_its_bag(tmp_path, m
                                    progress=said.append,
                                    velocity_scaling=0.2, faults={'latency': 0.02},
                                    cartesian_speed_limit=0.3, real_time_factor=2.0,
-                                   detection={'gap_ceiling': 1})
+                                   detection={'gap_ceiling': 1}, timeout=900.0)
     assert [c['scenario'] for c in calls] == ['demo_hook'] * 2
     planner = [dict(a.split(':=', 1) for a in c['extra_planner_args'][1::2]) for c in calls]
     assert [p['seed'] for p in planner] == ['0', '1']
@@ -149,6 +149,7 @@ def test_a_robot_run_hands_the_nodes_its_settings_and_checks_its_bag(tmp_path, m
     assert planner[0]['gap_ceiling'] == '1.0' and planner[0]['cartesian_speed_limit'] == '0.3'
     assert calls[0]['extra_mock_args'] == ('-p', 'latency:=0.02')
     assert calls[0]['sim_time'] is True and calls[0]['real_time_factor'] == 2.0
+    assert calls[0]['timeout'] == 900.0
     # the bag's hole of 0.21 s: 20 states missed, the run not valid, run again next time
     assert [(r['missed_states'], r['max_state_gap_s']) for r in records] == \
         [(20, pytest.approx(0.21))] * 2
@@ -290,8 +291,10 @@ def test_the_client_waits_for_a_newer_status_and_else_gives_the_latest(ros):
     # the demo follows the run by asking for a status newer than the one it has: none newer
     # within the timeout gives the latest again (not an error), a newer one comes at once
     planner = FakePlanner(ros)
-    planner.publish('idle')
     with PlannerClient() as client:
+        # no status at all: nothing says that a start whose answer was lost took effect
+        assert not demo._started(client, wait=0.3)
+        planner.publish('idle')
         idle = client.status(timeout=10.0)
         assert idle == {'state': 'idle'}
         began = time.monotonic()
