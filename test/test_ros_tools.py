@@ -161,6 +161,10 @@ def test_a_robot_run_hands_the_nodes_its_settings_and_checks_its_bag(tmp_path, m
                          cartesian_speed_limit=0.3, real_time_factor=2.0,
                          detection={'gap_ceiling': 1})
     assert len(calls) == 4
+    # the driver guard that holds reaches the mock as its parameter
+    run_robot_experiment(tmp_path / 'holds', ['demo_hook'], [Method.parse('probabilistic')], 1,
+                         faults={'latency': 0.02}, guard_holds=True)
+    assert calls[-1]['extra_mock_args'] == ('-p', 'latency:=0.02', '-p', 'guard_holds:=true')
 
 
 def test_a_robot_run_that_timed_out_is_tried_again_and_timed_alone(tmp_path, monkeypatch):
