@@ -132,6 +132,53 @@ def test_a_sweep_of_another_seed_is_refused_in_the_same_directory(tmp_path):
     # nor one whose planner settings differ (an ablation of K belongs in its own directory)
     with pytest.raises(ValueError, match='planner defaults'):
         run_sweep(keys, tmp_path, workers=1, rrt={'iterations': 400})
+    # nor one that allows another number of paths (its success rates are not comparable)
+    with pytest.raises(ValueError, match='--max-paths 20'):
+        run_sweep(keys, tmp_path, max_paths=5, workers=1)
+
+
+def test_an_episode_record_runs_the_keys_world_with_its_seed_paths_and_planner(monkeypatch):
+    # every method meets the world of the key's seed and plans from that seed's own stream,
+    # with the sweep's number of paths and planner settings; the record keeps what it did
+    from probdis_ros.experiments import sweep
+    from probdis_ros.sim import episode
+    from probdis_ros.sim.worlds import random_world
+
+    real, calls = episode.run_episode, []
+
+    def spy(world, method, **kwargs):
+        result = real(world, method, **kwargs)
+        result.empty_plans = 1          # as if a plan had been empty: the record says so
+        calls.append((world, kwargs, result))
+        return result
+
+    monkeypatch.setattr(episode, 'run_episode', spy)
+    monkeypatch.setattr(sweep, '_WORLDS', {})       # no world drawn before
+    keys = episode_keys(['2d'], [1], 2, [Method.parse('epsilon:0.2')], 3)
+    for key in keys:
+        record = sweep.run_episode_record(key, 2, {'iterations': 300})
+        world, kwargs, result = calls[-1]
+        assert world.to_dict() == random_world('2d', 1, key.world_seed).to_dict()
+        assert kwargs['seed'] == key.world_seed and kwargs['max_paths'] == 2
+        assert kwargs['settings'].iterations == 300
+        assert 'error' not in record and record['rrt'] == {'iterations': 300}
+        assert (record['success'], record['paths'], record['failures'],
+                record['empty_plans'], record['plan_times_s']) == (
+            result.success, result.paths, result.failures, 1, result.plan_times_s)
+    assert calls[0][0].to_dict() != calls[1][0].to_dict()
+    # a family's key: the family world of its seed (the sweep seed plus the world index)
+    from probdis_ros.sim import families
+
+    drawn = []
+
+    def family_world(family, seed):
+        drawn.append((family, seed))
+        return random_world('2d', 1, seed)
+
+    monkeypatch.setattr(families, 'random_family_world', family_world)
+    key = family_keys(['open_box'], 2, [Method.parse('epsilon:0.2')], 1000)[1]
+    assert 'error' not in sweep.run_episode_record(key, 1)
+    assert drawn == [('open_box', 1001)] and calls[-1][1]['seed'] == 1001
 
 
 def test_an_episode_that_raises_is_recorded_as_errored_and_the_sweep_goes_on(

@@ -28,6 +28,7 @@ from probdis_ros.physics.family_scenes import (
     THICKNESS,
 )
 from probdis_ros.physics.oracle import first_collision
+from probdis_ros.planning import Method
 from probdis_ros.sim.families import FAMILIES, random_family_world
 import pytest
 
@@ -153,6 +154,29 @@ def test_an_offline_physics_episode_on_a_family_world_reaches_a_verdict():
     episode = run_physics_episode(SCENES['hook_bar'], 'probabilistic', seed=0, max_paths=1)
     assert episode.outcome in ('gave_up', 'succeeded') and episode.paths == 1
     assert len(episode.failures) >= 1 and episode.contact_force.max() > 10.0
+
+
+def test_an_offline_physics_episode_plans_as_the_planner_node_does_with_what_it_is_given():
+    # the node's defaults (its goal tolerance, retreat, joint margin and table), unless the
+    # caller gives others; the seed chooses the planner's draws
+    from probdis_ros.model.table import ROBOT_TABLE
+    from probdis_ros.planning.disentangle import DEFAULT_MIN_RETREAT, ROBOT_GOAL_TOLERANCE
+    from probdis_ros.planning.prob_rrt import ROBOT_JOINT_MARGIN
+
+    scene = SCENES['hook_bar']
+    loop = run_physics_episode(scene, 'probabilistic', seed=3, max_paths=1).loop
+    assert (loop.seed, loop.max_paths, loop.goal_tolerance, loop.min_retreat) == (
+        3, 1, ROBOT_GOAL_TOLERANCE, DEFAULT_MIN_RETREAT)
+    assert loop.planner.planner.settings.joint_margin == ROBOT_JOINT_MARGIN
+    assert loop.arm.table is ROBOT_TABLE and loop.fmap.c_fail == Method.parse(
+        'probabilistic').map_c_fail()
+    other = run_physics_episode(scene, 'probabilistic', seed=4, max_paths=1,
+                                goal_tolerance=0.02, min_retreat=0.05, table=None,
+                                c_fail=7.0).loop
+    assert (other.seed, other.goal_tolerance, other.min_retreat, other.fmap.c_fail) == (
+        4, 0.02, 0.05, 7.0)
+    assert other.arm.table is None
+    assert not np.array_equal(loop.attempts[0].path, other.attempts[0].path)
 
 
 def test_the_robot_experiment_runs_the_maps_informed_ideas_offline_only(probdis, tmp_path):

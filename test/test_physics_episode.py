@@ -69,6 +69,11 @@ def test_a_driver_stopped_by_the_speed_monitoring_is_restarted_and_the_run_resum
     assert not again.success and again.restarts == 2 and again.paths == 3
     assert again.message.count(DRIVER_STOPPED) == 3 and not again.failures
     assert again.summary()['driver_restarts'] == 2 and len(again.restarted_at) == 2
+    assert len(again.plan_times_s) == again.paths         # every start's plans
+    # allowed one restart: two starts, two paths, stopped twice
+    one = run_physics_episode('demo_hook', 'probabilistic', seed=1, max_paths=3,
+                              robot_settings=monitored, restarts=1)
+    assert (one.restarts, one.paths, one.message.count(DRIVER_STOPPED)) == (1, 2, 2)
     # the arm rested, held, before each restart; the last start planned from where it was
     stopped, restarted = again.restarted_at[-1] - RESTART_AFTER, again.restarted_at[-1]
     resting = again.configs[(again.times > stopped + 1.0) & (again.times <= restarted)]

@@ -269,6 +269,31 @@ def test_an_episode_in_a_hand_made_world():
     assert len(result.plan_times_s) == result.paths
 
 
+def test_an_episode_that_gives_up_counts_its_paths_and_failures():
+    # one path allowed, blocked: given up after that one, with its one failure learned
+    world = World('2d', START, GOAL, [BLOCKER], name='blocker')
+    result = run_episode(world, 'probabilistic', seed=0, max_paths=1)
+    assert not result.success and result.loop.state is State.GAVE_UP
+    assert (result.paths, result.failures, result.empty_plans) == (1, 1, 0)
+    assert len(result.traces) == 1 and len(result.plan_times_s) == 1
+
+
+def test_an_episode_counts_empty_plans_and_passes_on_its_planner_settings_and_c_fail(
+        monkeypatch):
+    from probdis_ros.planning import Method, RRTSettings
+
+    world = World('2d', START, GOAL, [BLOCKER], name='blocker')
+    settings = RRTSettings(iterations=321)
+    result = run_episode(world, 'probabilistic', seed=0, max_paths=2, settings=settings,
+                         c_fail=7.0)
+    assert result.loop.planner.settings is settings and result.loop.fmap.c_fail == 7.0
+    # a planner that never finds a path: every path an empty plan, the arm never moves
+    monkeypatch.setattr(Method, 'planner', lambda self, arm, settings=None: NoPlanner())
+    result = run_episode(world, 'probabilistic', seed=0, max_paths=3)
+    assert not result.success and (result.paths, result.empty_plans) == (3, 3)
+    assert result.summary()['empty_plans'] == 3 and result.failures == 0
+
+
 def test_world_and_planner_draw_from_independent_streams_of_one_seed():
     from probdis_ros.planning.seeds import PLANNER, stream, WORLD
 
