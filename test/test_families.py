@@ -228,6 +228,7 @@ def test_every_world_draws_its_start_goal_and_sizes_within_the_documented_ranges
     for (family, seed), world in worlds.items():
         x0, xg = world.arm.fk(np.array([world.start, world.goal])).positions
         assert in_workspace(np.array([x0, xg])).all(), (family, seed)
+        assert world.arm.above_table(np.array([world.start, world.goal])).all()
         for x in (x0, xg):
             assert 0.35 <= np.hypot(x[0], x[1]) <= 0.7 and 0.15 <= x[2] <= 0.75
         p = world.params
@@ -250,6 +251,12 @@ def test_every_world_draws_its_start_goal_and_sizes_within_the_documented_ranges
             for i in (m for m in range(3) if m != k):
                 room = max(half[i] - p['hole_radius'] - HOLE_MARGIN, 0.0)
                 assert abs(local[i]) <= HOLE_SPREAD * room + 1e-3, (seed, i)
+            # the exit it was built with passes straight through the hole, from inside out
+            way, hole = np.array(world.way_out), np.array(p['hole_center'])
+            assert len(way) == 2 and abs(axes[k] @ (way[0] - center)) < half[k] < \
+                abs(axes[k] @ (way[1] - center))
+            along = (way[1] - way[0]) / np.linalg.norm(way[1] - way[0])
+            assert np.linalg.norm(np.cross(hole - way[0], along)) < 1e-3
         if family == 'closed_box':
             assert _between(p['orientation_tolerance'], 0.25, 0.45)
         if family == 'hook_bar':
@@ -343,7 +350,20 @@ def test_following_a_line_keeps_the_flange_on_it():
     assert np.linalg.norm(xs[-1] - target) < 0.005
     assert np.abs(xs[:, :2] - x0[:2]).max() < 0.005
     # a line that leaves the arm's reach: no path, not one that strays from the line
-    assert follow(world.arm, world.start, [np.array([1.3, 0.0, 0.3])]) is None
+    assert follow(world.arm, world.start, [np.array([1.1, 0.0, 0.36])]) is None
+    # from joints at their limits: a way along the line within the limits, or none
+    arm, followed = world.arm, 0
+    for j in range(6):
+        for limit, inward in ((arm.lower[j], 0.002), (arm.upper[j], -0.002)):
+            q0 = np.array([0.0, 0.8, 0.0, -1.2, 0.0, 0.9, 0.0])
+            q0[j] = limit + inward
+            x0 = arm.fk(q0).positions[0]
+            for d in np.vstack([np.eye(3), -np.eye(3)]):
+                path = follow(arm, q0, [x0 + 0.1 * d])
+                if path is not None:
+                    followed += 1
+                    assert ((path >= arm.lower) & (path <= arm.upper)).all(), (j, limit, d)
+    assert followed > 0
 
 
 def test_an_unknown_family_is_named():
