@@ -74,6 +74,13 @@ def test_a_driver_stopped_by_the_speed_monitoring_is_restarted_and_the_run_resum
     one = run_physics_episode('demo_hook', 'probabilistic', seed=1, max_paths=3,
                               robot_settings=monitored, restarts=1)
     assert (one.restarts, one.paths, one.message.count(DRIVER_STOPPED)) == (1, 2, 2)
+    # a time limit that ends the rest before the restart: the episode ends at the limit
+    limit = once.sim_time_s + 0.5 * RESTART_AFTER
+    late = run_physics_episode('demo_hook', 'probabilistic', seed=1, max_paths=3,
+                               robot_settings=monitored, restarts=1, time_limit=limit)
+    assert late.restarts == 0 and late.message.endswith(f'time limit of {limit:.0f} s '
+                                                        'simulated reached')
+    assert limit <= late.sim_time_s < limit + 0.02     # within a controller period
     # the arm rested, held, before each restart; the last start planned from where it was
     stopped, restarted = again.restarted_at[-1] - RESTART_AFTER, again.restarted_at[-1]
     resting = again.configs[(again.times > stopped + 1.0) & (again.times <= restarted)]
