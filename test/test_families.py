@@ -165,6 +165,28 @@ def test_a_plate_with_a_hole_lets_the_flange_out_only_through_the_hole(worlds):
         assert 0.03 <= radius <= 0.06
 
 
+def test_a_plate_is_covered_everywhere_but_at_its_hole(worlds):
+    # a point of the plate outside the hole lies in one of its discs (to the 4 decimals of
+    # the params): no gap between the ring and the tiles around it
+    for seed in SEEDS:
+        world = worlds[('plate_hole', seed)]
+        p = world.params
+        axes, center, half = (np.array(p[k]) for k in ('axes', 'center', 'half_size'))
+        k, sign = 'xyz'.index(p['plate_side'][1]), p['plate_side'][0] == '-'
+        i, j = [m for m in range(3) if m != k]
+        plate = center + (-1 if sign else 1) * half[k] * axes[k]
+        discs = [o for o in world.obstacles
+                 if abs(axes[k] @ (o.center - plate)) < 1e-3 and abs(o.normal @ axes[k]) > 0.99]
+        u, v = np.meshgrid(np.linspace(-1, 1, 121) * half[i], np.linspace(-1, 1, 121) * half[j])
+        points = plate + u.reshape(-1, 1) * axes[i] + v.reshape(-1, 1) * axes[j]
+        hole = np.array(p['hole_center'])
+        points = points[np.linalg.norm(points - hole, axis=1) > 1.1 * p['hole_radius']]
+        covered = np.zeros(len(points), dtype=bool)
+        for disc in discs:
+            covered |= np.linalg.norm(points - disc.center, axis=1) <= disc.radius + 1e-4
+        assert covered.all(), (seed, points[~covered][:3])
+
+
 def test_the_ring_of_a_hole_covers_the_annulus_it_promises():
     radius = ring_radius(0.04, 0.13)
     d = 0.04 + radius
