@@ -23,10 +23,11 @@ matter to it.
 from dataclasses import dataclass
 
 import numpy as np
-from probdis_ros.model import iiwa_arm
+from probdis_ros.model import iiwa_arm, PlanarArm
 from probdis_ros.motion.jtc import TrajectoryController
 from probdis_ros.planning.disentangle import Disentangler
-from probdis_ros.run import PlanFrom, Run, RunSettings, Send
+from probdis_ros.run import PlanCancelledError, PlanFrom, Run, RunSettings, Send
+import pytest
 
 ARM = iiwa_arm()
 Q0 = np.array([0.3, 0.2, 0.0, -1.1, 0.0, 0.6, 0.0])
@@ -66,6 +67,39 @@ def sends(run: Run) -> list:
     out = [a.command for a in run.actions if isinstance(a, Send)]
     run.actions.clear()
     return out
+
+
+# ---------------------------------------------------------------- settings
+
+
+@pytest.mark.parametrize('name', ['acceleration_limit', 'jerk_limit', 'state_timeout',
+                                  'replan_tolerance'])
+@pytest.mark.parametrize('bad', [0.0, -0.1, np.nan])
+def test_a_run_refuses_a_limit_timeout_or_tolerance_that_is_not_positive(name, bad):
+    # a state_timeout of 0 stops every run at its first tick, a replan_tolerance of 0 replans
+    # every path whose start the arm has crept off by a microradian: refused by name
+    with pytest.raises(ValueError, match=f'{name} must be positive'):
+        RunSettings(**{name: bad})
+
+
+def test_a_run_refuses_an_unknown_jtc_start_naming_the_known_ones():
+    # a misspelt jtc_start ('desire') would plan from the measured state while JTC starts
+    # from its command: every path then begins with a step
+    with pytest.raises(ValueError, match='jtc_start must be one of measured, desired, got'):
+        RunSettings(jtc_start='desire')
+
+
+def test_the_motion_limits_carry_every_setting_and_the_arms_own_limits():
+    # every motion is timed with these: a setting dropped here would drive the arm at the
+    # default instead of what the operator set
+    arm = PlanarArm(velocity_limit=1.5)
+    limits = RunSettings(velocity_scaling=0.5, acceleration_scaling=0.25,
+                         acceleration_limit=3.0, jerk_limit=40.0).limits(arm)
+    assert (limits.velocity_scaling, limits.acceleration_scaling) == (0.5, 0.25)
+    np.testing.assert_array_equal(limits.velocity, arm.velocity_limits)
+    assert np.all(limits.acceleration == 3.0) and np.all(limits.jerk == 40.0)
+    np.testing.assert_array_equal(limits.lower, arm.lower)
+    np.testing.assert_array_equal(limits.upper, arm.upper)
 
 
 # ---------------------------------------------------------------- stamps and holds
@@ -110,3 +144,133 @@ def test_a_path_after_a_stop_that_has_come_to_rest_is_held_however_soon_it_is_se
     # path started 0.12 s into its ramp, JTC's command at 1.5 x a joint's velocity limit
     for gap in (0.5, 1.5):
         assert restart_after_a_stop(gap, 0.12).max() <= 0.2 + 1e-6    # velocity_scaling
+
+
+# ---------------------------------------------------------------- blocks, plans, latencies
+
+
+def drive(run: Run, clock: list, until: float, blocked=(), plan_after: float = 0.0,
+          lead: float = 0.0, t: float = 0.0, done=lambda run: False) -> float:
+    """
+    Drive the run on an arm that follows each command motion_delay late, every 10 ms.
+
+    The arm is held where it is during each (start, end) interval of ``blocked``; the run's
+    clock reads ``lead`` s past each state's time (the host's processing); each plan comes
+    back ``plan_after`` s after it was asked for.  From t until the run ends, ``until`` or
+    done(run); return the time driven to.
+    """
+    delay = run.settings.detection.motion_delay
+    held, asked = None, []
+    while run.active and t < until and not done(run):
+        t = round(t + PERIOD, 9)
+        clock[0] = t + lead
+        jtc = run.trajectory
+        q = jtc.sample(t - jtc.taken_at - delay)[0] if jtc is not None else run.measured
+        if any(start <= t < end for start, end in blocked):
+            held = q if held is None else held
+        else:
+            held = None
+        run.on_joint_state(t, q if held is None else held, None)
+        asked += [(t + plan_after, a) for a in run.actions if isinstance(a, PlanFrom)]
+        run.actions[:] = [a for a in run.actions if not isinstance(a, PlanFrom)]
+        for item in [a for a in asked if a[0] <= t]:
+            asked.remove(item)
+            run.on_plan(run.loop.next_path(item[1].config))
+        run.tick(t)
+    return t
+
+
+def blocked_and_retreated(lead: float = 0.0, **settings) -> tuple[Run, list, float]:
+    """Return a run whose first path was blocked at 0.6 s, its retreat done, plan awaited."""
+    clock = [0.0]
+    run = new_run(clock=lambda: clock[0], **settings)
+    run.start(0.0, Q0)
+    answer_plans(run)
+    t = drive(run, clock, 10.0, blocked=[(0.6, 1.2)], plan_after=np.inf, lead=lead,
+              done=lambda run: run.retreat_done_at is not None)
+    assert run.phase.value == 'retreating' and run.plan_pending
+    return run, clock, t
+
+
+def test_the_replan_latency_counts_the_retreat_and_the_wait_for_the_plan_after_it():
+    # after a block the status reports how long until the next path was ready: from the
+    # block seen to its retreat sent (the host's clock, here 0.02 s on), plus however long
+    # the plan came after the retreat was done (0.3 s, 0.32 s on the host's clock)
+    run, clock, t = blocked_and_retreated(lead=0.02)
+    assert run.retreat_sent - run.block_time == pytest.approx(0.02)
+    t = run.retreat_done_at + 0.3
+    clock[0] = t + 0.02
+    run.on_plan(run.loop.next_path(run.measured))
+    assert run.phase.value == 'executing'
+    assert run.latencies == [pytest.approx(0.34)]
+    assert run.status()['last_replan_latency_s'] == pytest.approx(0.34)
+    # a plan that came before the retreat was done waits for nothing more than the host
+    # (0.02 s at the block, 0.02 s at the retreat's end)
+    drive(run, clock, 20.0, t=t, blocked=[(t + 0.6, t + 1.2)], plan_after=0.0, lead=0.02,
+          done=lambda run: len(run.latencies) > 1)
+    assert run.latencies[1] == pytest.approx(0.04)
+    assert run.status()['last_replan_latency_s'] == pytest.approx(0.04)
+    assert run.status()['replan_latencies_s'] == run.latencies
+
+
+# ---------------------------------------------------------------- ends
+
+
+def test_a_run_stopped_while_planning_cancels_the_next_plan_and_drops_the_one_under_way():
+    # the planner runs on the host's worker: after a stop no further plan may start, and
+    # the result of the one under way must not send the arm anywhere
+    run = new_run(clock=lambda: 0.0)
+    run.start(0.0, Q0)
+    asked = [a for a in run.actions if isinstance(a, PlanFrom)]
+    run.stop()
+    assert run.phase.value == 'stopped' and run.loop.state.value == 'stopped'
+    with pytest.raises(PlanCancelledError):
+        run.loop.planner.plan(Q0, Q1, run.loop.fmap, None)
+    run.actions.clear()
+    run.on_plan(np.array([Q0, Q1]))
+    run.plan_failed(RuntimeError('the planner failed after the stop'))
+    assert not run.actions and run.message == 'stopped on request'
+    assert asked and not run.plan_pending
+
+
+def test_a_stop_after_the_run_has_ended_still_holds_the_arm():
+    # ~/stop is the operator's way to hold the arm whatever the run's state: after the run
+    # has ended (here at its goal) it still sends a command to rest
+    run = new_run(clock=lambda: 0.0)
+    run.start(0.0, Q1)
+    assert run.outcome == 'succeeded' and not run.active
+    run.actions.clear()
+    run.stop()
+    held = sends(run)
+    assert len(held) == 1 and np.abs(held[0].positions - Q1).max() < 1e-9
+    assert run.outcome == 'succeeded'
+
+
+# ---------------------------------------------------------------- status
+
+
+def test_the_status_counts_paths_failures_and_proposals_and_shows_the_newest():
+    # the node publishes this document as it is: the operator reads the run from it
+    run = new_run(clock=lambda: 0.0)
+    status = run.status()
+    assert (status['state'], status['paths'], status['failures'], status['proposal']) == \
+        ('idle', 0, 0, 0)
+    assert status['last_replan_latency_s'] is None and status['proposed_path'] is None
+    run, _, _ = blocked_and_retreated()
+    status = run.status()
+    assert (status['state'], status['paths'], status['failures']) == ('retreating', 1, 1)
+    run.on_plan(run.loop.next_path(run.measured))
+    status = run.status()
+    assert (status['state'], status['paths'], status['failures']) == ('executing', 2, 1)
+    times = run.loop.plan_times
+    assert times[0] != times[1] and status['last_plan_time_s'] == times[1]
+    # with confirm_paths, the path waiting and how many were proposed
+    run = new_run(clock=lambda: 0.0, confirm_paths=True)
+    run.start(0.0, Q0)
+    answer_plans(run)
+    run.actions.clear()
+    assert run.status()['proposal'] == 1
+    np.testing.assert_allclose(run.status()['proposed_path'], [Q0, Q1])
+    assert run.decline(0.0) == ''
+    answer_plans(run)
+    assert run.status()['proposal'] == 2 and run.status()['paths'] == 1
