@@ -24,9 +24,17 @@ from dataclasses import dataclass
 
 import numpy as np
 from probdis_ros.model import iiwa_arm, PlanarArm
-from probdis_ros.motion.jtc import TrajectoryController
+from probdis_ros.motion.jtc import JtcTrajectory, TrajectoryController
 from probdis_ros.planning.disentangle import Disentangler
-from probdis_ros.run import PlanCancelledError, PlanFrom, Run, RunSettings, Send
+from probdis_ros.run import (
+    PlanCancelledError,
+    PlanFrom,
+    rest_command,
+    Run,
+    RunSettings,
+    Send,
+    STAMP_LEAD,
+)
 import pytest
 
 ARM = iiwa_arm()
@@ -146,6 +154,21 @@ def test_a_path_after_a_stop_that_has_come_to_rest_is_held_however_soon_it_is_se
         assert restart_after_a_stop(gap, 0.12).max() <= 0.2 + 1e-6    # velocity_scaling
 
 
+def test_with_a_measured_start_a_path_moves_at_once_and_with_a_desired_start_after_a_hold():
+    # JTC runs a stamped message from its stamp: a path from a command that stands still
+    # first holds it STAMP_LEAD, so that one taken late starts within the hold; with the
+    # measured start nothing is stamped (JTC starts it when it takes it) and the path has
+    # no hold to pay for
+    for start, hold in (('measured', 0.0), ('desired', STAMP_LEAD)):
+        run = new_run(clock=lambda: 1.0, jtc_start=start)
+        run.start(1.0, Q0)
+        answer_plans(run)
+        path = sends(run)[0]
+        moving = np.flatnonzero(np.abs(path.positions - Q0).max(axis=1) > 0)[0]
+        assert path.times[moving] == pytest.approx(hold + PERIOD)
+        assert path.stamp == (1.0 if start == 'desired' else 0.0)
+
+
 # ---------------------------------------------------------------- blocks, plans, latencies
 
 
@@ -186,6 +209,8 @@ def blocked_and_retreated(lead: float = 0.0, **settings) -> tuple[Run, list, flo
     run = new_run(clock=lambda: clock[0], **settings)
     run.start(0.0, Q0)
     answer_plans(run)
+    if run.phase.value == 'awaiting_confirmation':
+        run.confirm(0.0)
     t = drive(run, clock, 10.0, blocked=[(0.6, 1.2)], plan_after=np.inf, lead=lead,
               done=lambda run: run.retreat_done_at is not None)
     assert run.phase.value == 'retreating' and run.plan_pending
@@ -211,6 +236,54 @@ def test_the_replan_latency_counts_the_retreat_and_the_wait_for_the_plan_after_i
     assert run.latencies[1] == pytest.approx(0.04)
     assert run.status()['last_replan_latency_s'] == pytest.approx(0.04)
     assert run.status()['replan_latencies_s'] == run.latencies
+
+
+def test_a_block_counts_one_latency_until_its_path_is_proposed_not_another_at_the_confirm():
+    # with confirm_paths the latency ends when the next path is shown to the operator; the
+    # time the operator takes is not the planner's, and confirming it is no second replan
+    run, clock, _ = blocked_and_retreated(confirm_paths=True)
+    run.on_plan(run.loop.next_path(run.measured))
+    assert run.phase.value == 'awaiting_confirmation' and len(run.latencies) == 1
+    clock[0] += 0.2
+    assert run.confirm(clock[0]) == '' and run.phase.value == 'executing'
+    assert len(run.latencies) == 1
+
+
+# ---------------------------------------------------------------- proposals
+
+
+def plans_from(run: Run) -> list:
+    """Answer each plan asked for, and each asked for then; return where each began."""
+    origins = []
+    while any(isinstance(a, PlanFrom) for a in run.actions):
+        asked = [a for a in run.actions if isinstance(a, PlanFrom)]
+        run.actions[:] = [a for a in run.actions if not isinstance(a, PlanFrom)]
+        for action in asked:
+            origins.append(action.config)
+            run.on_plan(run.loop.next_path(action.config))
+    return origins
+
+
+def test_with_a_desired_start_proposals_begin_and_are_confirmed_where_jtc_command_is():
+    # with a desired start JTC starts the next command from its own, which a free arm at
+    # rest may sit short of (here 0.08 rad L1, within d_dist): a path is planned from the
+    # command, declined or confirmed against it; measured against the arm, a confirm was
+    # refused as though the arm had moved, and a decline planned from where no command starts
+    command_at = Q0 + np.r_[0.0, 0.04, 0.0, 0.04, 0.0, 0.0, 0.0]
+    limits = RunSettings().limits(ARM)
+    holding = JtcTrajectory(rest_command(ARM, limits, command_at), command_at, None, -2.0)
+    run = new_run(clock=lambda: 0.0, confirm_paths=True, jtc_start='desired')
+    run.start(0.0, Q0, np.zeros(7), holding, -2.0)
+    assert np.abs(plans_from(run)[-1] - command_at).max() < 1e-9
+    assert run.phase.value == 'awaiting_confirmation'
+    np.testing.assert_allclose(run.proposed[0], command_at)
+    assert run.decline(0.0) == ''
+    origins = plans_from(run)
+    assert len(origins) == 1 and np.abs(origins[0] - command_at).max() < 1e-9
+    run.actions.clear()
+    assert run.confirm(0.0) == ''
+    sent = sends(run)
+    assert len(sent) == 1 and np.abs(sent[0].positions[0] - command_at).max() < 1e-9
 
 
 # ---------------------------------------------------------------- ends
