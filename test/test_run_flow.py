@@ -173,14 +173,15 @@ def test_with_a_measured_start_a_path_moves_at_once_and_with_a_desired_start_aft
 
 
 def drive(run: Run, clock: list, until: float, blocked=(), plan_after: float = 0.0,
-          lead: float = 0.0, t: float = 0.0, done=lambda run: False) -> float:
+          lead: float = 0.0, t: float = 0.0, done=lambda run: False,
+          origins: list | None = None) -> float:
     """
     Drive the run on an arm that follows each command motion_delay late, every 10 ms.
 
     The arm is held where it is during each (start, end) interval of ``blocked``; the run's
     clock reads ``lead`` s past each state's time (the host's processing); each plan comes
-    back ``plan_after`` s after it was asked for.  From t until the run ends, ``until`` or
-    done(run); return the time driven to.
+    back ``plan_after`` s after it was asked for (its start appended to ``origins``).  From
+    t until the run ends, ``until`` or done(run); return the time driven to.
     """
     delay = run.settings.detection.motion_delay
     held, asked = None, []
@@ -195,6 +196,8 @@ def drive(run: Run, clock: list, until: float, blocked=(), plan_after: float = 0
             held = None
         run.on_joint_state(t, q if held is None else held, None)
         asked += [(t + plan_after, a) for a in run.actions if isinstance(a, PlanFrom)]
+        if origins is not None:
+            origins += [a.config for a in run.actions if isinstance(a, PlanFrom)]
         run.actions[:] = [a for a in run.actions if not isinstance(a, PlanFrom)]
         for item in [a for a in asked if a[0] <= t]:
             asked.remove(item)
@@ -247,6 +250,52 @@ def test_a_block_counts_one_latency_until_its_path_is_proposed_not_another_at_th
     clock[0] += 0.2
     assert run.confirm(clock[0]) == '' and run.phase.value == 'executing'
     assert len(run.latencies) == 1
+
+
+def test_with_a_desired_start_the_plan_after_a_path_short_of_the_goal_begins_at_the_command():
+    # the arm ends a path 0.08 rad (L1) short of its command (a sag within d_dist: done),
+    # outside goal_tolerance: the next path is planned from where JTC's command holds, where
+    # the next command will start, not from the arm (which would be withdrawn and planned
+    # again: a plan lost)
+    clock = [1.0]
+    run = new_run(clock=lambda: clock[0], jtc_start='desired')
+    run.start(1.0, Q0)
+    answer_plans(run)
+    assert len(sends(run)) == 1
+    sag = np.r_[0.0, 0.04, 0.0, 0.04, 0.0, 0.0, 0.0]
+    jtc, delay = run.trajectory, run.settings.detection.motion_delay
+    t, asked = 1.0, []
+    while run.phase.value == 'executing' and t < 10.0:
+        t = clock[0] = round(t + PERIOD, 9)
+        q = jtc.sample(t - jtc.taken_at - delay)[0]
+        run.on_joint_state(t, q - sag * min(1.0, (t - 1.0) / jtc.duration), None)
+        asked += [a.config for a in run.actions if isinstance(a, PlanFrom)]
+        run.actions.clear()
+    assert run.phase.value == 'planning' and len(asked) == 1
+    np.testing.assert_allclose(asked[0], Q1, atol=1e-9)
+
+
+def test_a_plan_from_where_a_blocked_retreat_did_not_go_is_planned_again_from_the_arm():
+    # the retreat was blocked too: the arm is not where the plan made meanwhile begins (the
+    # retreat's target), whose first edge would be uncosted; it is planned again from where
+    # the arm is, and that path is sent
+    clock = [0.0]
+    run = new_run(clock=lambda: clock[0])
+    run.start(0.0, Q0)
+    answer_plans(run)
+    run.actions.clear()
+    origins = []
+    t = drive(run, clock, 10.0, blocked=[(0.6, 20.0)], plan_after=0.5, origins=origins,
+              done=lambda run: len(origins) > 1)
+    assert run.phase.value == 'planning' and run.plan_pending     # the status says so
+    clock[0] = t + 0.5
+    run.on_plan(run.loop.next_path(origins[-1]))
+    assert run.phase.value == 'executing'
+    held = run.measured
+    assert np.abs(held - Q0).sum() > 0.2 and run.loop.paths_tried == 2
+    assert len(origins) == 2 and np.abs(origins[0] - Q0).max() < 1e-9
+    np.testing.assert_allclose(origins[1], held, atol=1e-6)
+    np.testing.assert_allclose(run.loop.attempts[-1].path[0], held, atol=1e-6)
 
 
 # ---------------------------------------------------------------- proposals
