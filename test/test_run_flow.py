@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 from probdis_ros.model import iiwa_arm, PlanarArm
 from probdis_ros.motion.jtc import JtcTrajectory, TrajectoryController
+from probdis_ros.motion.profiles import from_state
 from probdis_ros.planning.disentangle import Disentangler
 from probdis_ros.run import (
     PlanCancelledError,
@@ -169,6 +170,47 @@ def test_with_a_measured_start_a_path_moves_at_once_and_with_a_desired_start_aft
         assert path.stamp == (1.0 if start == 'desired' else 0.0)
 
 
+def test_a_new_run_takes_up_jtc_command_on_the_time_line_it_was_sent_on():
+    # with a desired start a new run begins where JTC's last command is: on the time line
+    # of when it was sent, not of when the arm began to follow it (the detector moves that
+    # on for an arm that begins late, 0.15 s here); from that, the first path began 0.15 s
+    # of motion behind the command, a step JTC would take at once
+    limits = RunSettings().limits(ARM)
+    way = from_state(Q0, None, np.array([Q0, Q1]), limits)
+    running = JtcTrajectory(way.command, Q0, None, 0.15)          # sent at 0.0
+    commanded, speed, _ = running.sample(0.5)
+    assert np.abs(speed).max() > 0.05 and np.abs(commanded - running.sample(0.35)[0]).sum() > 0.01
+    clock = [0.5]
+    run = new_run(goal=Q0, clock=lambda: clock[0], jtc_start='desired')
+    run.start(0.5, running.sample(0.35)[0], running.sample(0.35)[1], running, 0.0)
+    plans_from(run)
+    sent = sends(run)
+    assert len(sent) == 1
+    np.testing.assert_allclose(sent[0].positions[0], commanded, atol=1e-9)
+    np.testing.assert_allclose(sent[0].velocities[0], speed, atol=1e-9)
+
+
+def test_a_start_within_goal_tolerance_succeeds_at_once_and_one_just_outside_plans():
+    # goal_tolerance is the planner's own: a start just outside it must still be driven there
+    for off, phase in ((0.03, 'succeeded'), (0.05, 'planning')):
+        run = new_run(clock=lambda: 0.0)
+        run.start(0.0, Q1 + np.r_[off, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+        assert run.phase.value == phase
+        assert sum(isinstance(a, PlanFrom) for a in run.actions) == (phase == 'planning')
+
+
+def test_a_measured_start_on_an_arm_still_moving_begins_its_path_at_the_arms_speed():
+    # the arm may still run the last command when a run starts: JTC starts the path from the
+    # measured state, velocity included; from rest it would stop the moving arm dead
+    moving = np.r_[0.2, -0.1, 0.0, 0.15, 0.0, 0.0, 0.0]
+    run = new_run(clock=lambda: 0.0)
+    run.start(0.0, Q0, moving)
+    answer_plans(run)
+    sent = sends(run)
+    assert len(sent) == 1
+    np.testing.assert_allclose(sent[0].velocities[0], moving, atol=1e-9)
+
+
 # ---------------------------------------------------------------- blocks, plans, latencies
 
 
@@ -296,6 +338,23 @@ def test_a_plan_from_where_a_blocked_retreat_did_not_go_is_planned_again_from_th
     assert len(origins) == 2 and np.abs(origins[0] - Q0).max() < 1e-9
     np.testing.assert_allclose(origins[1], held, atol=1e-6)
     np.testing.assert_allclose(run.loop.attempts[-1].path[0], held, atol=1e-6)
+
+
+def test_a_path_from_an_arm_pressed_after_a_blocked_retreat_may_be_blocked_at_once():
+    # the retreat moved, then was blocked too; the next path starts from the arm pressed
+    # against that: blocked at once, it has not moved the arm, which is a block to learn,
+    # not a controller that executes nothing
+    clock = [0.0]
+    run = new_run(clock=lambda: clock[0])
+    run.start(0.0, Q0)
+    answer_plans(run)
+    run.actions.clear()
+    t = drive(run, clock, 10.0, blocked=[(0.6, 20.0)],
+              done=lambda run: run.phase.value == 'retreating')
+    drive(run, clock, 20.0, t=t, blocked=[(t + 0.3, 40.0)],
+          done=lambda run: len(run.loop.fmap) >= 3)
+    assert run.active and len(run.loop.fmap) == 3, run.message
+    assert run.phase.value == 'retreating'
 
 
 # ---------------------------------------------------------------- proposals
