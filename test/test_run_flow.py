@@ -430,6 +430,19 @@ def test_a_stop_after_the_run_has_ended_still_holds_the_arm():
 # ---------------------------------------------------------------- status
 
 
+def test_the_peak_external_torque_is_only_what_the_arm_met_while_the_run_drove_it():
+    # the status reports how hard the run pushed: a push on the arm before the run began or
+    # after it ended (someone moving it by hand) is not the run's
+    run = new_run(clock=lambda: 0.0)
+    pushed = np.r_[0.0, 40.0, 0.0, 20.0, 0.0, 0.0, 0.0]
+    for k in range(50):
+        run.on_joint_state(0.01 * k, Q1, np.zeros(7), pushed)
+    run.start(0.5, Q1)                                  # at the goal: ends at once
+    for k in range(50):
+        run.on_joint_state(0.5 + 0.01 * k, Q1, np.zeros(7), pushed)
+    assert not run.active and run.status()['peak_external_torque_nm'] is None
+
+
 def test_the_status_counts_paths_failures_and_proposals_and_shows_the_newest():
     # the node publishes this document as it is: the operator reads the run from it
     run = new_run(clock=lambda: 0.0)
