@@ -59,9 +59,10 @@ class Straight:
         return Path(np.array([start, goal]))
 
 
-def new_run(goal=Q1, clock=None, **settings) -> Run:
+def new_run(goal=Q1, clock=None, max_paths=5, **settings) -> Run:
     """Return a run to goal (RunSettings(**settings)) on the straight planner."""
-    loop = Disentangler(ARM, Straight(), goal, max_paths=5, seed=0, goal_tolerance=0.04)
+    loop = Disentangler(ARM, Straight(), goal, max_paths=max_paths, seed=0,
+                        goal_tolerance=0.04)
     return Run(ARM, loop, RunSettings(**settings), clock=clock)
 
 
@@ -289,9 +290,10 @@ def test_a_block_counts_one_latency_until_its_path_is_proposed_not_another_at_th
     run, clock, _ = blocked_and_retreated(confirm_paths=True)
     run.on_plan(run.loop.next_path(run.measured))
     assert run.phase.value == 'awaiting_confirmation' and len(run.latencies) == 1
+    latency = run.latencies[0]
     clock[0] += 0.2
     assert run.confirm(clock[0]) == '' and run.phase.value == 'executing'
-    assert len(run.latencies) == 1
+    assert run.latencies == [latency]
 
 
 def test_with_a_desired_start_the_plan_after_a_path_short_of_the_goal_begins_at_the_command():
@@ -355,6 +357,71 @@ def test_a_path_from_an_arm_pressed_after_a_blocked_retreat_may_be_blocked_at_on
           done=lambda run: len(run.loop.fmap) >= 3)
     assert run.active and len(run.loop.fmap) == 3, run.message
     assert run.phase.value == 'retreating'
+
+
+def test_a_block_on_the_last_path_allowed_gives_up_at_once_and_plans_nothing_more():
+    # max_paths reached with the block: the run ends there (the arm brought to rest), no
+    # plan is asked for that could only come back empty
+    clock = [0.0]
+    run = new_run(clock=lambda: clock[0], max_paths=1)
+    run.start(0.0, Q0)
+    answer_plans(run)
+    run.actions.clear()
+    origins = []
+    drive(run, clock, 5.0, blocked=[(0.6, 20.0)], origins=origins)
+    assert (run.outcome, run.message) == ('gave_up', 'max_paths reached')
+    assert not origins and len(run.loop.fmap) == 1
+
+
+def test_a_block_judged_on_a_state_with_newer_ones_waiting_is_answered_at_the_tick():
+    # a block judged in a burst is answered from the newest state; when the newer states
+    # never come (the stream stopped), the next tick answers it from the last one
+    clock = [0.0]
+    run = new_run(clock=lambda: clock[0])
+    run.start(0.0, Q0)
+    answer_plans(run)
+    jtc, delay = run.trajectory, run.settings.detection.motion_delay
+    t = 0.0
+    while run.detector is not None and t < 5.0:
+        t = clock[0] = round(t + PERIOD, 9)
+        run.on_joint_state(t, jtc.sample(min(t, 0.6) - delay)[0], None, newest=t < 0.6)
+    assert run.phase.value == 'executing' and run._judged is not None
+    run.tick(t + PERIOD)
+    assert run.phase.value == 'retreating' and len(run.loop.fmap) == 1
+    assert sum(isinstance(a, Send) for a in run.actions) == 2       # the path, its retreat
+
+
+def test_the_latest_take_is_kept_over_the_run_not_only_the_last_commands():
+    # the status tells how late any command began (an arm lagging more than motion_delay:
+    # measure it again), not only the last: here the path 0.15 s late, its retreat on time
+    clock = [0.0]
+    run = new_run(clock=lambda: clock[0])
+    run.start(0.0, Q0)
+    answer_plans(run)
+    run.actions.clear()
+    delay = run.settings.detection.motion_delay
+    t = 0.0
+    while run.phase.value == 'executing' and t < 5.0:
+        t = clock[0] = round(t + PERIOD, 9)
+        jtc = run.trajectory
+        run.on_joint_state(t, jtc.sample(min(t, 0.9) - jtc.taken_at - delay - 0.15)[0])
+    assert run.phase.value == 'retreating'
+    drive(run, clock, 10.0, t=t, plan_after=np.inf,
+          done=lambda run: run.retreat_done_at is not None)
+    assert run.retreat_done_at is not None
+    assert run.status()['late_take_max_s'] == pytest.approx(0.15, abs=0.02)
+
+
+def test_a_run_that_reaches_its_goal_says_so_and_sends_nothing_after_its_path():
+    # at the goal the path's own end holds the arm there; a stop would only nudge it
+    clock = [0.0]
+    run = new_run(clock=lambda: clock[0])
+    run.start(0.0, Q0)
+    answer_plans(run)
+    run.actions.clear()
+    drive(run, clock, 10.0)
+    assert (run.outcome, run.message) == ('succeeded', 'goal reached')
+    assert not any(isinstance(a, Send) for a in run.actions)
 
 
 # ---------------------------------------------------------------- proposals
