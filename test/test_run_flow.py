@@ -391,6 +391,28 @@ def test_a_block_judged_on_a_state_with_newer_ones_waiting_is_answered_at_the_ti
     assert sum(isinstance(a, Send) for a in run.actions) == 2       # the path, its retreat
 
 
+def test_a_stop_before_a_judged_block_is_answered_brings_the_pressed_command_back_to_the_arm():
+    # desired start: JTC's command has run on past the held arm; stopped before the block is
+    # answered, the stop must still treat the arm as held and bring the command back to it,
+    # or JTC would hold it pressed in (200 Nm/rad on the real arm)
+    clock = [0.0]
+    run = new_run(clock=lambda: clock[0], jtc_start='desired')
+    run.start(0.0, Q0)
+    answer_plans(run)
+    run.actions.clear()
+    jtc, delay = run.trajectory, run.settings.detection.motion_delay
+    t = 0.0
+    while run.detector is not None and t < 5.0:
+        t = clock[0] = round(t + PERIOD, 9)
+        run.on_joint_state(t, jtc.sample(min(t, 0.6) - delay)[0], None, newest=False)
+    held = jtc.sample(0.6 - delay)[0]
+    assert run._judged is not None and np.abs(jtc.sample(t)[0] - held).sum() > 0.1
+    run.stop()
+    stop = sends(run)[-1]
+    assert run.outcome == 'stopped'
+    np.testing.assert_allclose(stop.positions[-1], held, atol=0.02)
+
+
 def test_the_latest_take_is_kept_over_the_run_not_only_the_last_commands():
     # the status tells how late any command began (an arm lagging more than motion_delay:
     # measure it again), not only the last: here the path 0.15 s late, its retreat on time
