@@ -413,6 +413,30 @@ def test_a_stop_before_a_judged_block_is_answered_brings_the_pressed_command_bac
     np.testing.assert_allclose(stop.positions[-1], held, atol=0.02)
 
 
+def test_a_stop_after_silence_does_not_carry_on_an_arm_that_had_stopped_near_its_command():
+    # the arm stopped dead 20 ms ago, still within d_dist of its command (not yet judged),
+    # and says so in its velocities; then no state for 50 ms: the stop starts where the arm
+    # is, not where the command took it meanwhile (as though it still followed), which would
+    # pull it on into what stopped it
+    clock = [0.0]
+    run = new_run(clock=lambda: clock[0], velocity_scaling=0.7)
+    run.start(0.0, Q0)
+    answer_plans(run)
+    jtc, delay = run.trajectory, run.settings.detection.motion_delay
+    t = 0.0
+    while t < 0.62:
+        t = clock[0] = round(t + PERIOD, 9)
+        q, v, _ = jtc.sample(min(t, 0.6) - delay)
+        run.on_joint_state(t, q, v if t <= 0.6 else 0 * v)
+    held = jtc.sample(0.6 - delay)[0]
+    assert np.abs(jtc.sample(t - delay)[0] - held).sum() < run.settings.detection.d_dist
+    assert np.abs(jtc.sample(t - delay)[1]).sum() > 1.0 and run.phase.value == 'executing'
+    clock[0] = t + 0.05
+    run.actions.clear()
+    run.stop()
+    np.testing.assert_allclose(sends(run)[-1].positions[0], held, atol=1e-9)
+
+
 def test_the_latest_take_is_kept_over_the_run_not_only_the_last_commands():
     # the status tells how late any command began (an arm lagging more than motion_delay:
     # measure it again), not only the last: here the path 0.15 s late, its retreat on time
