@@ -437,6 +437,27 @@ def test_a_stop_after_silence_does_not_carry_on_an_arm_that_had_stopped_near_its
     np.testing.assert_allclose(sends(run)[-1].positions[0], held, atol=1e-9)
 
 
+def test_a_stop_of_an_arm_on_its_command_without_velocities_starts_at_the_commands_speed():
+    # a driver that sends no velocities, its positions noisy (1 mrad at 1 kHz): an arm on
+    # its command moves as the command says; the slope of its positions is the noise
+    # differentiated (about 0.1 rad/s a joint over the window), a stop from it a step
+    rng = np.random.default_rng(0)
+    clock = [0.0]
+    run = new_run(clock=lambda: clock[0], velocity_scaling=0.7)
+    run.start(0.0, Q0)
+    answer_plans(run)
+    jtc, delay = run.trajectory, run.settings.detection.motion_delay
+    t = 0.0
+    while t < 0.5:
+        t = clock[0] = round(t + 0.001, 9)
+        run.on_joint_state(t, jtc.sample(t - delay)[0] + rng.normal(0.0, 0.001, 7), None)
+    assert run.phase.value == 'executing' and run.following
+    run.actions.clear()
+    run.stop()
+    np.testing.assert_allclose(sends(run)[-1].velocities[0], jtc.sample(t - delay)[1],
+                               atol=1e-9)
+
+
 def test_the_latest_take_is_kept_over_the_run_not_only_the_last_commands():
     # the status tells how late any command began (an arm lagging more than motion_delay:
     # measure it again), not only the last: here the path 0.15 s late, its retreat on time
