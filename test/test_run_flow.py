@@ -72,6 +72,15 @@ def answer_plans(run: Run) -> None:
         run.on_plan(run.loop.next_path(action.config))
 
 
+def started_run(**settings) -> tuple[Run, list]:
+    """Return a run started at Q0 at time 0, its first path planned, and its clock to set."""
+    clock = [0.0]
+    run = new_run(clock=lambda: clock[0], **settings)
+    run.start(0.0, Q0)
+    answer_plans(run)
+    return run, clock
+
+
 def sends(run: Run) -> list:
     """Return the commands the run sent, and forget its actions."""
     out = [a.command for a in run.actions if isinstance(a, Send)]
@@ -251,10 +260,7 @@ def drive(run: Run, clock: list, until: float, blocked=(), plan_after: float = 0
 
 def blocked_and_retreated(lead: float = 0.0, **settings) -> tuple[Run, list, float]:
     """Return a run whose first path was blocked at 0.6 s, its retreat done, plan awaited."""
-    clock = [0.0]
-    run = new_run(clock=lambda: clock[0], **settings)
-    run.start(0.0, Q0)
-    answer_plans(run)
+    run, clock = started_run(**settings)
     if run.phase.value == 'awaiting_confirmation':
         run.confirm(0.0)
     t = drive(run, clock, 10.0, blocked=[(0.6, 1.2)], plan_after=np.inf, lead=lead,
@@ -323,10 +329,7 @@ def test_a_plan_from_where_a_blocked_retreat_did_not_go_is_planned_again_from_th
     # the retreat was blocked too: the arm is not where the plan made meanwhile begins (the
     # retreat's target), whose first edge would be uncosted; it is planned again from where
     # the arm is, and that path is sent
-    clock = [0.0]
-    run = new_run(clock=lambda: clock[0])
-    run.start(0.0, Q0)
-    answer_plans(run)
+    run, clock = started_run()
     run.actions.clear()
     origins = []
     t = drive(run, clock, 10.0, blocked=[(0.6, 20.0)], plan_after=0.5, origins=origins,
@@ -346,10 +349,7 @@ def test_a_path_from_an_arm_pressed_after_a_blocked_retreat_may_be_blocked_at_on
     # the retreat moved, then was blocked too; the next path starts from the arm pressed
     # against that: blocked at once, it has not moved the arm, which is a block to learn,
     # not a controller that executes nothing
-    clock = [0.0]
-    run = new_run(clock=lambda: clock[0])
-    run.start(0.0, Q0)
-    answer_plans(run)
+    run, clock = started_run()
     run.actions.clear()
     t = drive(run, clock, 10.0, blocked=[(0.6, 20.0)],
               done=lambda run: run.phase.value == 'retreating')
@@ -362,10 +362,7 @@ def test_a_path_from_an_arm_pressed_after_a_blocked_retreat_may_be_blocked_at_on
 def test_a_block_on_the_last_path_allowed_gives_up_at_once_and_plans_nothing_more():
     # max_paths reached with the block: the run ends there (the arm brought to rest), no
     # plan is asked for that could only come back empty
-    clock = [0.0]
-    run = new_run(clock=lambda: clock[0], max_paths=1)
-    run.start(0.0, Q0)
-    answer_plans(run)
+    run, clock = started_run(max_paths=1)
     run.actions.clear()
     origins = []
     drive(run, clock, 5.0, blocked=[(0.6, 20.0)], origins=origins)
@@ -376,10 +373,7 @@ def test_a_block_on_the_last_path_allowed_gives_up_at_once_and_plans_nothing_mor
 def test_a_block_judged_on_a_state_with_newer_ones_waiting_is_answered_at_the_tick():
     # a block judged in a burst is answered from the newest state; when the newer states
     # never come (the stream stopped), the next tick answers it from the last one
-    clock = [0.0]
-    run = new_run(clock=lambda: clock[0])
-    run.start(0.0, Q0)
-    answer_plans(run)
+    run, clock = started_run()
     jtc, delay = run.trajectory, run.settings.detection.motion_delay
     t = 0.0
     while run.detector is not None and t < 5.0:
@@ -395,10 +389,7 @@ def test_a_stop_before_a_judged_block_is_answered_brings_the_pressed_command_bac
     # desired start: JTC's command has run on past the held arm; stopped before the block is
     # answered, the stop must still treat the arm as held and bring the command back to it,
     # or JTC would hold it pressed in (200 Nm/rad on the real arm)
-    clock = [0.0]
-    run = new_run(clock=lambda: clock[0], jtc_start='desired')
-    run.start(0.0, Q0)
-    answer_plans(run)
+    run, clock = started_run(jtc_start='desired')
     run.actions.clear()
     jtc, delay = run.trajectory, run.settings.detection.motion_delay
     t = 0.0
@@ -418,10 +409,7 @@ def test_a_stop_after_silence_does_not_carry_on_an_arm_that_had_stopped_near_its
     # and says so in its velocities; then no state for 50 ms: the stop starts where the arm
     # is, not where the command took it meanwhile (as though it still followed), which would
     # pull it on into what stopped it
-    clock = [0.0]
-    run = new_run(clock=lambda: clock[0], velocity_scaling=0.7)
-    run.start(0.0, Q0)
-    answer_plans(run)
+    run, clock = started_run(velocity_scaling=0.7)
     jtc, delay = run.trajectory, run.settings.detection.motion_delay
     t = 0.0
     while t < 0.62:
@@ -442,10 +430,7 @@ def test_a_stop_of_an_arm_on_its_command_without_velocities_starts_at_the_comman
     # its command moves as the command says; the slope of its positions is the noise
     # differentiated (about 0.1 rad/s a joint over the window), a stop from it a step
     rng = np.random.default_rng(0)
-    clock = [0.0]
-    run = new_run(clock=lambda: clock[0], velocity_scaling=0.7)
-    run.start(0.0, Q0)
-    answer_plans(run)
+    run, clock = started_run(velocity_scaling=0.7)
     jtc, delay = run.trajectory, run.settings.detection.motion_delay
     t = 0.0
     while t < 0.5:
@@ -461,10 +446,7 @@ def test_a_stop_of_an_arm_on_its_command_without_velocities_starts_at_the_comman
 def test_the_latest_take_is_kept_over_the_run_not_only_the_last_commands():
     # the status tells how late any command began (an arm lagging more than motion_delay:
     # measure it again), not only the last: here the path 0.15 s late, its retreat on time
-    clock = [0.0]
-    run = new_run(clock=lambda: clock[0])
-    run.start(0.0, Q0)
-    answer_plans(run)
+    run, clock = started_run()
     run.actions.clear()
     delay = run.settings.detection.motion_delay
     t = 0.0
@@ -481,10 +463,7 @@ def test_the_latest_take_is_kept_over_the_run_not_only_the_last_commands():
 
 def test_a_run_that_reaches_its_goal_says_so_and_sends_nothing_after_its_path():
     # at the goal the path's own end holds the arm there; a stop would only nudge it
-    clock = [0.0]
-    run = new_run(clock=lambda: clock[0])
-    run.start(0.0, Q0)
-    answer_plans(run)
+    run, clock = started_run()
     run.actions.clear()
     drive(run, clock, 10.0)
     assert (run.outcome, run.message) == ('succeeded', 'goal reached')
