@@ -877,8 +877,7 @@ class Run:
         """
         now = self._time() if planned_at is None else planned_at
         last = self._last_command(now)
-        if self._desired_start and self._command_holds(now) and not motion.velocities[0].any() \
-                and not motion.accelerations[0].any():
+        if self._desired_start and self._command_holds(now) and motion.from_rest:
             motion = motion.held_first(STAMP_LEAD)
         command = stamped(self._message(motion), now, self._desired_start)
         self._emit(Send(command, path, now))

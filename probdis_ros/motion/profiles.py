@@ -171,6 +171,11 @@ class Motion:
         """Return when the motion is at rest at its end [s]."""
         return float(self.times[-1])
 
+    @property
+    def from_rest(self) -> bool:
+        """Tell whether the motion starts at rest (no velocity, no acceleration)."""
+        return not (self.velocities[0].any() or self.accelerations[0].any())
+
     def held_first(self, hold: float) -> Motion:
         """
         Return this motion (from rest) begun after holding its start for ``hold`` [s].
@@ -179,7 +184,7 @@ class Motion:
         then starts inside the hold, where its command stands still; taken late into the
         move itself, the command would step ahead to catch up with the stamp's time line.
         """
-        if not (np.all(self.velocities[0] == 0) and np.all(self.accelerations[0] == 0)):
+        if not self.from_rest:
             raise ValueError('only a motion from rest can hold its start')
         steps = int(np.ceil(hold / self.period - 1e-9))
         if steps <= 0:

@@ -333,21 +333,9 @@ class SimulatedRobot:
         """
         # in open loop the driver measures the command it sent the period before
         measured = self._sent_before.copy() if self.settings.echo else self.engine.q.copy()
-        limits = self._limits
-        reason = None
-        outside = (sent < limits.lower) | (sent > limits.upper)
-        speed = np.abs(measured - self._guard_passed) / self.settings.period
-        over = speed / limits.velocity_limits
-        if outside.any():
-            joint = int(np.argmax(outside))
-            reason = f'position command of A{joint + 1} outside its limits ({sent[joint]:.4f} rad)'
-        elif over.max() > 1.0 + 1e-9:
-            joint = int(np.argmax(over))
-            reason = (f'A{joint + 1} measured at {speed[joint]:.2f} rad/s, above its velocity '
-                      f'limit {limits.velocity_limits[joint]:.2f} rad/s')
-        else:
-            self._guard_passed = measured
+        reason = self._command_guard(sent, measured - self._guard_passed)
         if reason is None:
+            self._guard_passed = measured
             return sent
         self.guard_trips += 1
         self.guard_trip = reason
@@ -377,12 +365,21 @@ class SimulatedRobot:
                         f'stop)')
         if not self.settings.guard or self.settings.guard_holds:
             return None
+        return self._command_guard(sent, self.engine.q - before)
+
+    def _command_guard(self, sent: np.ndarray, moved: np.ndarray) -> str | None:
+        """
+        Return why the lbr command guard refuses a command, or None.
+
+        sent outside the position limits, or the measured motion over one period, moved,
+        faster than the velocity limits.
+        """
         limits = self._limits
         outside = (sent < limits.lower) | (sent > limits.upper)
         if outside.any():
             joint = int(np.argmax(outside))
             return f'position command of A{joint + 1} outside its limits ({sent[joint]:.4f} rad)'
-        speed = np.abs(self.engine.q - before) / self.settings.period
+        speed = np.abs(moved) / self.settings.period
         over = speed / limits.velocity_limits
         if over.max() > 1.0 + 1e-9:
             joint = int(np.argmax(over))
