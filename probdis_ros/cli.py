@@ -1476,7 +1476,8 @@ def build_parser() -> argparse.ArgumentParser:
                        '"Parameters")')
     robot.add_argument('--restarts', type=int, default=0, metavar='N',
                        help='with --offline: when the driver stops the arm (its command '
-                       "guard, KUKA's speed monitoring), restart it and start the planner "
+                       "guard, KUKA's speed monitoring) or its guard holds it as the run ends "
+                       '(--guard-holds), restart it and start the planner '
                        'again, as an operator would, at most N times per run (its map kept; '
                        'all starts together plan at most 20 paths; default 0)')
     robot.add_argument('--guard-holds', action='store_true',

@@ -24,6 +24,7 @@ from probdis_ros.motion.detector import (
     external_torque,
     ExternalTorqueObserver,
     RETREAT_START_WAIT,
+    START_WAIT,
     Verdict,
 )
 from probdis_ros.motion.gravity import GravityModel
@@ -154,6 +155,44 @@ def test_an_arm_that_never_moves_is_held_if_its_torques_rise_and_unrun_if_not(ef
             break
     assert found is verdict, detector.reason
     assert ('held where it stood' in detector.reason) == (verdict is Verdict.BLOCKED)
+
+
+@pytest.mark.parametrize('efforts, stop, verdict', [
+    ('pressing', 0.8, Verdict.BLOCKED), ('pressing, noisy', 2.5, Verdict.BLOCKED),
+    ('held by its driver', 0.8, Verdict.NOT_EXECUTED),
+    ('held by its driver, noisy', 2.5, Verdict.NOT_EXECUTED), (None, 2.5, Verdict.BLOCKED)])
+def test_an_arm_that_stops_on_its_way_is_blocked_if_it_presses_and_let_go_if_not(efforts, stop,
+                                                                                 verdict):
+    # a path that moves A2 by 0.2 rad/s for 4 s; the arm follows it until stop, then rests.
+    # Blocked, its spring presses it on what holds it (200 Nm/rad x the gap); held by a
+    # driver whose guard sends the measured position, it presses on nothing (here 3 Nm off
+    # for load data a little wrong, and noise of 1 Nm per sample and joint): no block to
+    # learn, once START_WAIT has passed since the command began (a controller that took it
+    # late leaves such a gap too).  Without efforts nothing tells them apart: a block
+    gravity = GravityModel()
+    rng = np.random.default_rng(1)
+    times = np.linspace(0.0, 4.0, 41)
+    command = JtcTrajectory(TrajectoryCommand(times, HELD + np.outer(times, [0, 0.2, 0, 0, 0,
+                                                                             0, 0])),
+                            HELD, np.zeros(7))
+    settings = DetectorSettings()
+    detector = BlockDetector(command, 0.0, settings, expect_motion=True)
+    found = Verdict.MOVING
+    for t in np.arange(0.01, 5.0, 0.01):
+        q = command.sample(min(t, stop) - settings.motion_delay)[0]
+        spring = 200.0 * (command.sample(t - settings.motion_delay)[0] - q)
+        noise = rng.normal(0.0, 1.0, 7) if 'noisy' in str(efforts) else 0.0
+        effort = None if efforts is None else \
+            gravity(q) + noise + (spring if 'pressing' in efforts else 3.0)
+        found = detector.update(t, q, external_torque(settings, q, effort))
+        if found is not Verdict.MOVING:
+            break
+    assert found is verdict, detector.reason
+    assert ('let go of the command' in detector.reason) == (verdict is Verdict.NOT_EXECUTED)
+    if verdict is Verdict.NOT_EXECUTED and stop < START_WAIT:
+        assert START_WAIT <= t < START_WAIT + 0.05, detector.reason
+    else:       # the stall: 0.3 s after the gap passed d_dist, half a second after the stop
+        assert stop + 0.3 < t < stop + 1.0, detector.reason
 
 
 @pytest.mark.parametrize('efforts, before', [('held', 0.4), ('idle', None)])

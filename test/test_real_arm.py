@@ -222,17 +222,30 @@ def test_a_path_from_a_still_command_that_jtc_takes_late_starts_without_a_step(
         assert robot.command_speed_peak > 1.0
 
 
-def test_a_run_whose_driver_guard_holds_the_arm_for_good_stops_and_says_where_to_look():
+def test_a_run_whose_driver_guard_holds_the_arm_stops_on_the_path_it_let_go_of():
     # messages 0.2 s late: the arm springs back from a block it pressed longer, at 1.34 rad/s
     # on A4 (limit 1.31); a driver whose guard holds instead of ending the session then
-    # holds the arm for good while it runs and reports: the run sees nothing move under a
-    # path and a retreat and stops, naming the driver's log line
+    # holds the arm for good while it runs and reports.  The next path moves the arm a
+    # little, then it rests short of its command pressing on nothing: no block, the arm let
+    # go of it.  The run stops there, learning nothing of it, and names the driver's log
+    # line; restarted, the driver frees the arm and the run goes on to the goal
     from probdis_ros.physics.family_scenes import family_scene_name
-    from probdis_ros.physics.simulated_robot import DRIVER_STOPPED
+    from probdis_ros.physics.simulated_robot import DRIVER_STOPPED, GUARD_HELD
 
-    held = run_physics_episode(family_scene_name('clutter', 5002), 'informed', seed=0,
-                               robot_settings=RobotSettings(command_latency=0.2,
-                                                            guard_holds=True))
+    scene = family_scene_name('clutter', 5002)
+    settings = RobotSettings(command_latency=0.2, guard_holds=True)
+    held = run_physics_episode(scene, 'informed', seed=0, robot_settings=settings)
     assert not held.success and DRIVER_STOPPED not in held.message
+    assert 'let go of the command' in held.message
     assert 'nothing executes the commands' in held.message
     assert 'Overriding invalid command to neutral command.' in held.message
+    # the block before the guard tripped, and the retreat it tripped in (the arm coasting,
+    # not at rest when its gap passed the ceiling); taken for blocks, the path after it and
+    # its retreat were learned too: 4 failures
+    assert len(held.failures) == 2
+    assert 'let go' not in ' '.join(failure['why'] for failure in held.failures)
+    freed = run_physics_episode(scene, 'informed', seed=0, robot_settings=settings,
+                                restarts=1)
+    assert freed.success and freed.restarts == 1, freed.message
+    assert f'({GUARD_HELD} ' in freed.message
+    assert [f['t'] for f in freed.failures[:2]] == [f['t'] for f in held.failures]

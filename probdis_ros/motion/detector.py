@@ -61,7 +61,13 @@ joint impedance follows its command with a lag) with where it is.  The L1 gap
   by then: a retreat taken late is no block (it was called one, and the late retreat then
   moved the arm the run held at rest).  A command that starts pressed in is not waited for.
   A short path whose gap never passes ``d_dist`` is not executed if it has not moved the
-  arm by ``START_WAIT``.
+  arm by ``START_WAIT``.  Nor is a command the arm **let go of**: it moved, then came to rest
+  short of the command (a gap block) while pressing toward it by less than
+  ``HELD_TORQUE_RISE``, where the joint states carry efforts: a blocked arm presses with its
+  spring, stiffness x the gap; an arm its driver holds (the lbr guard that sends the measured
+  position) presses on nothing.  That is no block to learn either; it is waited for until
+  ``START_WAIT`` has passed since the command began (a controller that took the command
+  late, unseen because the arm still settled from the command before, leaves such a gap).
 
 A command that starts **pressed in** (``pressed_start``: JTC started it from its last
 command, ``interpolate_from_desired_state``, while the arm was held short of that command
@@ -116,7 +122,10 @@ RETREAT_START_WAIT = 0.5
 #: this much toward the command since the command began (means over ENDS) is held by
 #: something: JTC runs the command and the impedance's spring pulls the arm toward it
 #: (200 Nm/rad x the gap: 20 Nm at d_dist), where a controller that runs nothing leaves the
-#: torques as they were, but for their noise.
+#: torques as they were, but for their noise.  Likewise an arm that moved, then came to rest
+#: short of its command: blocked, it presses toward the command at least this hard (13 Nm and
+#: more in every block of the training worlds, RESULTS "An arm that lets go"); a driver
+#: that holds it presses nowhere.
 HELD_TORQUE_RISE = 5.0
 #: [1/s] the external-torque observer follows a change at this rate (time constant 40 ms):
 #: quick beside a block's build-up, slow enough to smooth the efforts' noise
@@ -656,7 +665,7 @@ class BlockDetector:
         return True
 
     def _gap_block(self, reason: str) -> Verdict:
-        """Return a block seen in the gap, or NOT_EXECUTED for an arm that never moved."""
+        """Return a block seen in the gap, or NOT_EXECUTED: the arm never moved, or let go."""
         if not self.started:
             s = self.settings
             within = (not s.gap_ceiling or self.gap <= s.gap_ceiling) and \
@@ -682,7 +691,36 @@ class BlockDetector:
                                      f'(L1; A{joint + 1} {rise[joint]:.1f} Nm)')
             self.reason = still
             return Verdict.NOT_EXECUTED
+        pressing = self._pressing()
+        if pressing is not None and pressing < HELD_TORQUE_RISE and self._settled():
+            if self._history[-1][0] - self.start_time < START_WAIT:
+                # the controller may have taken it late, after the arm moved on a command
+                # before (settling from a block): its gap is then the delay, not a block
+                return Verdict.MOVING
+            self.reason = (f'{reason}, but the arm rests without pressing on anything: its '
+                           f'external torque toward the command is {pressing:.1f} Nm (L1), '
+                           f'where a block in joint impedance presses with the stiffness x the '
+                           f'gap; it let go of the command')
+            return Verdict.NOT_EXECUTED
         return self._blocked(reason)
+
+    def _pressing(self) -> float | None:
+        """
+        Return how hard the arm presses toward the command now [Nm, L1]; None without efforts.
+
+        The mean effort - g(q) of the last ``ENDS`` seconds, on the joints the command pulls
+        (beyond ``PRESS_TOLERANCE``), in the pull's direction only.  An arm blocked in joint
+        impedance presses on what holds it with its spring, stiffness x the gap; one that
+        stopped without touching anything presses on nothing: a driver whose guard holds
+        the arm sends its measured position, which pulls nowhere.  Judged absolutely, not as
+        a rise: a path that begins while a block's torque still fades (the driver's torque
+        filter, 0.1 s) would read that fading as a rise toward its command.
+        """
+        if len(self._torques) < HELD_SAMPLES:
+            return None
+        pull = np.where(np.abs(self._pull) > PRESS_TOLERANCE, np.sign(self._pull), 0.0)
+        now = np.mean([torque for _, torque in self._torques], axis=0)
+        return float(np.clip(pull * now, 0.0, None).sum())
 
     def _held_rise(self) -> np.ndarray:
         """

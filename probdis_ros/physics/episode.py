@@ -36,7 +36,12 @@ from probdis_ros.model.table import ROBOT_TABLE, Table
 from probdis_ros.motion.cartesian_speed import point_speeds
 from probdis_ros.physics.model import TABLE
 from probdis_ros.physics.settings import PhysicsSettings
-from probdis_ros.physics.simulated_robot import build_robot, DRIVER_STOPPED, RobotSettings
+from probdis_ros.physics.simulated_robot import (
+    build_robot,
+    DRIVER_STOPPED,
+    GUARD_HELD,
+    RobotSettings,
+)
 from probdis_ros.planning import Disentangler, Method, RRTSettings, State
 from probdis_ros.planning.disentangle import (
     DEFAULT_MAX_PATHS,
@@ -143,11 +148,13 @@ def run_physics_episode(scene: str, method: str | Method = 'probabilistic', seed
     the ideal mock, JTC as ``run_settings`` models it).
 
     ``restarts``: when the driver stops the arm (its command guard, KUKA's speed
-    monitoring), the operator lets the arm come to rest for :data:`RESTART_AFTER`, restarts
-    the driver and starts the planner again, at most this many times: the map keeps what
-    was learned (the node keeps it on disk), the new run plans from where the arm is, and
-    all runs together plan at most ``max_paths`` paths.  A restart the robot application
-    refuses (the arm presses on something: ``SimulatedRobot.restart``) ends the episode.
+    monitoring), or its guard holds the arm as the run ends (``guard_holds``: the run stops
+    on an arm that let go of its command), the operator lets the arm come to rest for
+    :data:`RESTART_AFTER`, restarts the driver and starts the planner again, at most this
+    many times: the map keeps what was learned (the node keeps it on disk), the new run
+    plans from where the arm is, and all runs together plan at most ``max_paths`` paths.  A
+    restart the robot application refuses (the arm presses on something:
+    ``SimulatedRobot.restart``) ends the episode.
 
     ``confirm_after``: with ``run_settings.confirm_paths``, the operator confirms each
     planned path this long [s, simulated] after it is proposed (the arm waits at rest).
@@ -239,10 +246,11 @@ def run_physics_episode(scene: str, method: str | Method = 'probabilistic', seed
         if run.active:
             run.finish(State.STOPPED, f'time limit of {time_limit:.0f} s simulated reached')
         paths_used += loop.paths_tried
-        if robot.stopped is None:
+        if robot.stopped is None and robot.holding is None:
             messages.append(run.message)
             break
-        messages.append(f'{run.message} ({DRIVER_STOPPED} {robot.stopped})')
+        messages.append(f'{run.message} ({DRIVER_STOPPED} {robot.stopped})' if robot.stopped
+                        else f'{run.message} ({GUARD_HELD} {robot.holding})')
         # (a run that reached the goal as the driver stopped is done: nothing to restart)
         if run.phase is Phase.SUCCEEDED or len(loops) > restarts or paths_used >= max_paths:
             break

@@ -104,6 +104,8 @@ class Engine(Protocol):
 #: What an episode's message says of each stop of the driver (its guard, KUKA's speed
 #: monitoring), before the reason.
 DRIVER_STOPPED = 'the driver stopped:'
+#: ... or its guard holds the arm (``guard_holds``), as the episodes' messages say it
+GUARD_HELD = "the driver's guard holds the arm:"
 #: [Nm] the robot application refuses to switch to joint impedance while the external torque
 #: on a joint is above this (current lbr stack releases; README "Pointing it at the real
 #: arm"), so a driver stopped while the arm presses on something cannot be restarted there.
@@ -237,6 +239,7 @@ class SimulatedRobot:
         self._guard_passed = q.copy()
         self.guard_trips = 0
         self.guard_trip: str | None = None    # why it tripped last
+        self.holding: str | None = None       # ... if it tripped in the last period too
         self._stop_torque = np.zeros(len(q))  # the contacts' torques then [Nm]
         self._reported: deque[JointStateSample] = deque()
         # (when JTC gets it, the command) of messages still on their way (command_latency)
@@ -334,6 +337,7 @@ class SimulatedRobot:
         # in open loop the driver measures the command it sent the period before
         measured = self._sent_before.copy() if self.settings.echo else self.engine.q.copy()
         reason = self._command_guard(sent, measured - self._guard_passed)
+        self.holding = reason
         if reason is None:
             self._guard_passed = measured
             return sent

@@ -320,14 +320,19 @@ def robot_table(records: list[dict], scenarios: list[str], methods: list[str],
                           else '-')
         lines.append('| fastest point of the arm per run, median / max [m/s] | ' +
                      ' | '.join(speeds) + ' |')
-    from probdis_ros.physics.simulated_robot import DRIVER_STOPPED
+    from probdis_ros.physics.simulated_robot import DRIVER_STOPPED, GUARD_HELD
 
-    if any(DRIVER_STOPPED in r.get('message', '') for r in records):
-        stops = []
+    def stops(record: dict) -> int:
+        message = record.get('message', '')
+        return message.count(DRIVER_STOPPED) + message.count(GUARD_HELD)
+
+    if any(stops(r) for r in records):
+        cells = []
         for method in methods:
-            counts = [r.get('message', '').count(DRIVER_STOPPED) for r in cell(None, method)]
-            stops.append(f'{sum(c > 0 for c in counts)} / {sum(counts)}')
-        lines.append('| runs the driver stopped / its stops | ' + ' | '.join(stops) + ' |')
+            counts = [stops(r) for r in cell(None, method)]
+            cells.append(f'{sum(c > 0 for c in counts)} / {sum(counts)}')
+        lines.append('| runs the driver stopped or held / its stops and holds | ' +
+                     ' | '.join(cells) + ' |')
     if left_out:
         lines.append(f'\n{len(left_out)} run(s) left out: the planner fell behind the '
                      f'simulation (joint states missed)')
