@@ -123,7 +123,7 @@ RETREAT_START_WAIT = 0.5
 #: something: JTC runs the command and the impedance's spring pulls the arm toward it
 #: (200 Nm/rad x the gap: 20 Nm at d_dist), where a controller that runs nothing leaves the
 #: torques as they were, but for their noise.  Likewise an arm that moved, then came to rest
-#: short of its command: blocked, it presses toward the command at least this hard (13 Nm and
+#: short of its command: blocked, it presses toward the command at least this hard (18 Nm and
 #: more in every block of the training worlds, RESULTS "An arm that lets go"); a driver
 #: that holds it presses nowhere.
 HELD_TORQUE_RISE = 5.0
