@@ -24,12 +24,14 @@ family), with five sets of the mock's faults, two trip times per scene and fault
 setting: the failures learned after the trip (none is real: the arm is held), the runs
 stopped on an arm that let go, and at every gap block of an arm that moved, before the
 trip, the torque it pressed toward its command with (``BlockDetector._pressing``; the test
-needs 5 Nm, ``HELD_TORQUE_RISE``) and how many of them were called let go.
+needs 5 Nm, ``HELD_TORQUE_RISE``) and how many of them were called let go; and which
+commands and tests the failures after the trip were learned on, with the test.
 Usage: python results/let_go/let_go.py --seed 7000 --worlds 4   (the training worlds)
        python results/let_go/let_go.py --seed 9100 --worlds 4   (the evaluation worlds)
 """
 
 import argparse
+from collections import Counter
 from multiprocessing import Pool
 
 import numpy as np
@@ -73,6 +75,15 @@ def _build(original):
     return build
 
 
+def kind(why: str) -> str:
+    """Return what a failure's reason says: a path's or a retreat's, and which test."""
+    tests = (('has not moved', 'never moved'), ('ceiling', 'gap over a ceiling'),
+             ('stalled', 'stall'), ('after the end', 'gap after the end'),
+             ('torque', 'torque'))
+    test = next((name for text, name in tests if text in why), why)
+    return f'{"retreat" if why.startswith("retreat") else "path"}: {test}'
+
+
 def one(job: tuple[str, dict, float, bool]) -> dict:
     """Run one scene with a trip at trip_at; let_go False: without the let-go test."""
     scene, faults, trip_at, let_go = job
@@ -84,6 +95,7 @@ def one(job: tuple[str, dict, float, bool]) -> dict:
                                   time_limit=120.0)
     return {'let_go': let_go, 'fault': next(iter(faults), 'none'),
             'after_trip': sum(f['t'] >= trip_at for f in episode.failures),
+            'kinds': [kind(f['why']) for f in episode.failures if f['t'] >= trip_at],
             'stopped_let_go': 'let go of the command' in episode.message,
             'blocks': [(p, let) for p, let in _state['blocks'] if p is not None]}
 
@@ -98,9 +110,11 @@ def main() -> None:
     SimulatedRobot._command_guard = _tripping_guard
     detector.BlockDetector._gap_block = _recorded_gap_block
     rng = np.random.default_rng(args.seed)
-    jobs = [(family_scene_name(family, seed), faults, float(rng.uniform(*TRIP_SPAN)), let_go)
-            for family in FAMILIES for seed in range(args.seed, args.seed + args.worlds)
-            for faults in FAULTS for _ in range(TRIPS) for let_go in (False, True)]
+    trips = [(family_scene_name(family, seed), faults, float(rng.uniform(*TRIP_SPAN)))
+             for family in FAMILIES for seed in range(args.seed, args.seed + args.worlds)
+             for faults in FAULTS for _ in range(TRIPS)]
+    # each trip twice, at the same time: without the test and with it
+    jobs = [(*trip, let_go) for trip in trips for let_go in (False, True)]
     with Pool(2) as pool:
         results = pool.map(one, jobs, chunksize=1)
     print(f'{len(jobs) // 2} runs per setting, seeds {args.seed}..'
@@ -115,6 +129,9 @@ def main() -> None:
         runs = [sum(r['after_trip'] > 0 for r in cell) for cell in cells]
         print(f'| {fault} | {learned[0]} / {learned[1]} | {runs[0]} / {runs[1]} | '
               f'{sum(r["stopped_let_go"] for r in cells[1])} |')
+    kinds = Counter(k for r in results if r['let_go'] for k in r['kinds'])
+    print('\nWith the test, the failures learned after the trip, by command and test: ' +
+          ', '.join(f'{name} {count}' for name, count in kinds.most_common()))
     blocks = [block for r in results if r['let_go'] for block in r['blocks']]
     pressing = np.array([p for p, _ in blocks])
     print(f'\nWith the test, gap blocks of an arm that moved, before the trip: {len(blocks)}; '
