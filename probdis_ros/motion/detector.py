@@ -718,9 +718,13 @@ class BlockDetector:
         """
         if len(self._torques) < HELD_SAMPLES:
             return None
-        pull = np.where(np.abs(self._pull) > PRESS_TOLERANCE, np.sign(self._pull), 0.0)
+        pull = self._pulled()
         now = np.mean([torque for _, torque in self._torques], axis=0)
         return float(np.clip(pull * now, 0.0, None).sum())
+
+    def _pulled(self) -> np.ndarray:
+        """Return per joint which way the command pulls the arm (0: within PRESS_TOLERANCE)."""
+        return np.where(np.abs(self._pull) > PRESS_TOLERANCE, np.sign(self._pull), 0.0)
 
     def _held_rise(self) -> np.ndarray:
         """
@@ -738,7 +742,7 @@ class BlockDetector:
             return np.zeros(len(self._pull))
         first = np.array(self._first_torques)
         last = np.array([torque for _, torque in self._torques])
-        pull = np.where(np.abs(self._pull) > PRESS_TOLERANCE, np.sign(self._pull), 0.0)
+        pull = self._pulled()
         rise = pull * (last.mean(axis=0) - first.mean(axis=0))
         n_first, n_last = len(first), len(last)
         spread = (n_first * first.var(axis=0) + n_last * last.var(axis=0)) / \
