@@ -20,6 +20,7 @@ import math
 import numpy as np
 from probdis_ros.motion.detector import (
     BlockDetector,
+    COAST_WAIT,
     DetectorSettings,
     external_torque,
     ExternalTorqueObserver,
@@ -195,11 +196,67 @@ def test_an_arm_that_stops_on_its_way_is_blocked_if_it_presses_and_let_go_if_not
         assert stop + 0.3 < t < stop + 1.0, detector.reason
 
 
-@pytest.mark.parametrize('efforts, before', [('held', 0.4), ('idle', None)])
-def test_a_retreat_held_from_its_start_is_blocked_as_soon_as_its_torque_rises(efforts, before):
+@pytest.mark.parametrize('arm, stop, verdict', [
+    ('held by its driver', 0.8, Verdict.NOT_EXECUTED),
+    ('held by its driver, noisy', 2.5, Verdict.NOT_EXECUTED),
+    ('slowed by a soft contact', 2.5, Verdict.BLOCKED), ('without efforts', 2.5, Verdict.BLOCKED),
+    ('creeping on', 2.5, Verdict.BLOCKED)])
+def test_an_arm_that_coasts_past_a_ceiling_is_judged_where_it_rests(arm, stop, verdict):
+    # a path that moves A2 by 0.5 rad/s for 4 s; the arm follows it until stop, then coasts
+    # to rest (its speed fading with a time constant of 0.4 s), so that its gap passes the
+    # joint ceiling 0.75 s later while it still moves (0.07 rad/s).  Held by its driver, it
+    # presses on nothing: waited for until it rests, and let go of there.  Slowed by a soft
+    # contact, its spring presses it on the contact: blocked at the ceiling, as without
+    # efforts.  One that creeps on (0.1 rad/s) pressing on nothing never rests: blocked
+    # COAST_WAIT after the ceiling
+    gravity = GravityModel()
+    rng = np.random.default_rng(2)
+    speed, tau = 0.5, 0.4
+    times = np.linspace(0.0, 4.0, 41)
+    command = JtcTrajectory(TrajectoryCommand(times, HELD + np.outer(times, [0, speed, 0, 0, 0,
+                                                                             0, 0])),
+                            HELD, np.zeros(7))
+    settings = DetectorSettings()
+    detector = BlockDetector(command, 0.0, settings, expect_motion=True)
+    found, ceiling = Verdict.MOVING, None
+    limit = settings.joint_gap_ceiling + settings.speed_allowance * speed
+    for t in np.arange(0.01, 6.0, 0.01):
+        q = command.sample(min(t, stop) - settings.motion_delay)[0]
+        after = max(t - stop, 0.0)
+        q[1] += 0.1 * after if arm == 'creeping on' else \
+            speed * tau * (1.0 - math.exp(-after / tau))
+        pull = command.sample(t - settings.motion_delay)[0] - q
+        if ceiling is None and pull[1] > limit:
+            ceiling = t
+        noise = rng.normal(0.0, 1.0, 7) if 'noisy' in arm else 0.0
+        effort = None if arm == 'without efforts' else \
+            gravity(q) + noise + (200.0 * pull if 'contact' in arm else 3.0)
+        found = detector.update(t, q, external_torque(settings, q, effort))
+        if found is not Verdict.MOVING:
+            break
+    assert found is verdict, detector.reason
+    assert ('let go of the command' in detector.reason) == (verdict is Verdict.NOT_EXECUTED)
+    assert ceiling is not None
+    if arm == 'creeping on':
+        assert ceiling + COAST_WAIT - 0.02 < t < ceiling + COAST_WAIT + 0.2, detector.reason
+    elif verdict is Verdict.BLOCKED:
+        assert 'above its ceiling' in detector.reason and t < ceiling + 0.1, detector.reason
+    else:       # at rest (its speed under 0.05 rad/s), and START_WAIT after the start
+        assert stop + 0.6 < ceiling < stop + 0.9
+        assert max(stop + tau * math.log(10.0), START_WAIT) <= t < stop + 1.3, detector.reason
+
+
+@pytest.mark.parametrize('efforts, verdict', [
+    ('held', Verdict.BLOCKED), ('pressed by the command before', Verdict.BLOCKED),
+    (None, Verdict.BLOCKED), ('idle', Verdict.NOT_EXECUTED)])
+def test_a_retreat_held_from_its_start_is_blocked_as_soon_as_its_torque_rises(efforts, verdict):
     # a retreat waits up to RETREAT_START_WAIT for a controller that takes it late; one held
     # where it stands, its spring pulling toward the command, presses on meanwhile: blocked
-    # once the rise shows, not at the end of the wait
+    # once the rise shows, not at the end of the wait.  One that the command before still
+    # presses on what blocked it (40 Nm away from the retreat), or without efforts, is
+    # blocked at the end of the wait.  One that presses on nothing either way (3 Nm off for
+    # load data a little wrong) is waited for as a path is: nothing holds it, and nothing
+    # runs the retreat once its gap passes a joint's ceiling (0.15 rad, at 0.48 s)
     gravity = GravityModel()
     times = np.linspace(0.0, 1.0, 11)
     pull = np.outer(times, [0, 0.4, 0, 0, 0, 0, 0])
@@ -208,15 +265,19 @@ def test_a_retreat_held_from_its_start_is_blocked_as_soon_as_its_torque_rises(ef
     found = Verdict.MOVING
     for t in np.arange(0.01, 3.0, 0.01):
         spring = 200.0 * (command.sample(t - detector.settings.motion_delay)[0] - HELD)
-        effort = gravity(HELD) + (spring if efforts == 'held' else 3.0)
+        effort = None if efforts is None else gravity(HELD) + {
+            'held': spring, 'idle': 3.0,
+            'pressed by the command before': np.array([0, -40.0, 0, 0, 0, 0, 0])}[efforts]
         found = detector.update(t, HELD, external_torque(detector.settings, HELD, effort))
         if found is not Verdict.MOVING:
             break
-    assert found is Verdict.BLOCKED, detector.reason        # waited for, in the end
-    if before is not None:
-        assert t < before, detector.reason
-    else:       # the torque as it was: waited for nearly all of RETREAT_START_WAIT
-        assert t > 0.9 * RETREAT_START_WAIT
+    assert found is verdict, detector.reason
+    if efforts == 'held':
+        assert t < 0.4, detector.reason
+    elif efforts == 'idle':
+        assert 'pressing on nothing' in detector.reason and 0.45 < t < 0.5, detector.reason
+    else:       # waited for nearly all of RETREAT_START_WAIT
+        assert 0.9 * RETREAT_START_WAIT < t <= RETREAT_START_WAIT + 0.01, detector.reason
 
 
 @pytest.mark.parametrize('spring, noise, verdict', [

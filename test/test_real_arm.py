@@ -239,13 +239,14 @@ def test_a_run_whose_driver_guard_holds_the_arm_stops_on_the_path_it_let_go_of()
     assert 'let go of the command' in held.message
     assert 'nothing executes the commands' in held.message
     assert 'Overriding invalid command to neutral command.' in held.message
-    # the block before the guard tripped, and the retreat it tripped in (the arm coasting,
-    # not at rest when its gap passed the ceiling); taken for blocks, the path after it and
-    # its retreat were learned too: 4 failures
-    assert len(held.failures) == 2
+    # the block before the guard tripped, alone: the retreat it tripped in let go too (the
+    # arm still coasting when its gap passed the ceiling: waited for until it rested), where
+    # it was learned before; taken for blocks, the path after it and its retreat were
+    # learned too: 4 failures
+    assert len(held.failures) == 1
     assert 'let go' not in ' '.join(failure['why'] for failure in held.failures)
     freed = run_physics_episode(scene, 'informed', seed=0, robot_settings=settings,
                                 restarts=1)
     assert freed.success and freed.restarts == 1, freed.message
     assert f'({GUARD_HELD} ' in freed.message
-    assert [f['t'] for f in freed.failures[:2]] == [f['t'] for f in held.failures]
+    assert [f['t'] for f in freed.failures[:1]] == [f['t'] for f in held.failures]

@@ -51,23 +51,29 @@ joint impedance follows its command with a lag) with where it is.  The L1 gap
   has not moved at all since the command began: nothing executes the command (an inactive
   controller), or something else holds the arm; that is no block to learn.  Where the joint
   states carry efforts, an arm whose external torque rose by ``HELD_TORQUE_RISE`` toward the
-  command meanwhile, beyond its noise, is held where it stood (the command runs and pulls
-  it): blocked.  An arm that begins to move later than the command said (a large message
-  delivered late, a busy controller) was started late by its controller: the command is
-  judged from when it began (the trajectory's ``taken_at`` moves on by the delay), not
+  command meanwhile, beyond its noise, and presses toward it by as much now (a block's torque
+  that fades after the command began rises too), is held where it stood (the command runs and
+  pulls it): blocked.  An arm that begins to move later than the command said (a large
+  message delivered late, a busy controller) was started late by its controller: the command
+  is judged from when it began (the trajectory's ``taken_at`` moves on by the delay), not
   taken for a block.  A command that need not move the arm (a retreat, a path from an arm
   pressed against something) is waited for alike, but for ``RETREAT_START_WAIT`` at most and
-  not once its external torque shows it held, and is **blocked** if the arm has not moved
-  by then: a retreat taken late is no block (it was called one, and the late retreat then
-  moved the arm the run held at rest).  A command that starts pressed in is not waited for.
-  A short path whose gap never passes ``d_dist`` is not executed if it has not moved the
-  arm by ``START_WAIT``.  Nor is a command the arm **let go of**: it moved, then came to rest
-  short of the command (a gap block) while pressing toward it by less than
+  not once its external torque shows it held, and is **blocked** if the arm has not moved by
+  then: a retreat taken late is no block (it was called one, and the late retreat then moved
+  the arm the run held at rest).  But where the joint states carry efforts, one whose arm
+  presses on nothing (below ``HELD_TORQUE_RISE`` either way on the joints it pulls: neither
+  its spring nor the command before it presses the arm) is waited for as a path is, and not
+  executed if the arm has not moved by ``START_WAIT``.  A command that starts pressed in is
+  not waited for.  A short path whose gap never passes ``d_dist`` is not executed if it has
+  not moved the arm by ``START_WAIT``.  Nor is a command the arm **let go of**: it moved,
+  then came to rest short of the command (a gap block) while pressing toward it by less than
   ``HELD_TORQUE_RISE``, where the joint states carry efforts: a blocked arm presses with its
   spring, stiffness x the gap; an arm its driver holds (the lbr guard that sends the measured
   position) presses on nothing.  That is no block to learn either; it is waited for until
-  ``START_WAIT`` has passed since the command began (a controller that took the command
-  late, unseen because the arm still settled from the command before, leaves such a gap).
+  ``START_WAIT`` has passed since the command began (a controller that took the command late,
+  unseen because the arm still settled from the command before, leaves such a gap).  An arm
+  whose gap passes a ceiling while it still moves, pressing by less than that, is waited for
+  up to ``COAST_WAIT`` to come to rest and judged there: a held arm coasts on.
 
 A command that starts **pressed in** (``pressed_start``: JTC started it from its last
 command, ``interpolate_from_desired_state``, while the arm was held short of that command
@@ -127,6 +133,10 @@ RETREAT_START_WAIT = 0.5
 #: more in every block of the training worlds, RESULTS "An arm that lets go"); a driver
 #: that holds it presses nowhere.
 HELD_TORQUE_RISE = 5.0
+#: An arm that moved and passed a gap block while still moving, pressing toward its command
+#: by less than ``HELD_TORQUE_RISE``, is waited for this long [s] at most to come to rest
+#: (where the let-go test judges it): a driver that holds the arm lets it coast on.
+COAST_WAIT = 1.0
 #: [1/s] the external-torque observer follows a change at this rate (time constant 40 ms):
 #: quick beside a block's build-up, slow enough to smooth the efforts' noise
 OBSERVER_GAIN = 25.0
@@ -446,6 +456,7 @@ class BlockDetector:
         self._first_torques: list[np.ndarray] = []
         self._torques: deque[tuple[float, np.ndarray]] = deque()
         self._pull = np.zeros(0)        # the command less the arm at the last sample [rad]
+        self._coasting_since: float | None = None  # a gap block first waited for rest [s]
         self.onset: Onset | None = None
         self.reason = ''
 
@@ -676,15 +687,27 @@ class BlockDetector:
                 if waited < RETREAT_START_WAIT and within and \
                         self._held_rise().sum() < HELD_TORQUE_RISE:
                     return Verdict.MOVING         # the controller may take it late
-                return self._blocked(f'{reason}; the arm has not moved in {waited:.2f} s '
-                                     f'since the command began')
+                torque = self._pressing(either_way=True)
+                if torque is None or torque >= HELD_TORQUE_RISE:
+                    return self._blocked(f'{reason}; the arm has not moved in {waited:.2f} s '
+                                         f'since the command began')
+                # the arm presses on nothing, by this command's spring or the one's before:
+                # waited for longer it is pressed no harder, and nothing holds it
+                if waited < START_WAIT and within:
+                    return Verdict.MOVING
+                self.reason = (f'{reason}; the arm has not moved in {waited:.2f} s since the '
+                               f'command began, pressing on nothing (its external torque on '
+                               f'the joints the command pulls is {torque:.1f} Nm, L1)')
+                return Verdict.NOT_EXECUTED
             if waited < START_WAIT and within:
                 return Verdict.MOVING             # the controller may take it late
             moved, _ = self.moved()
             still = (f'the arm has not moved since the command began ({moved:.3f} rad L1 in '
                      f'{self._history[-1][0] - self.start_time:.2f} s, {reason})')
             rise = self._held_rise()
-            if rise.sum() >= HELD_TORQUE_RISE:
+            # and presses toward the command now: a block's torque fading after the
+            # command began (a driver that holds the arm) rises toward it by as much
+            if rise.sum() >= HELD_TORQUE_RISE and (self._pressing() or 0.0) >= HELD_TORQUE_RISE:
                 joint = int(rise.argmax())
                 return self._blocked(f'held where it stood: {still}, while its external '
                                      f'torque rose by {rise.sum():.1f} Nm toward the command '
@@ -692,8 +715,18 @@ class BlockDetector:
             self.reason = still
             return Verdict.NOT_EXECUTED
         pressing = self._pressing()
-        if pressing is not None and pressing < HELD_TORQUE_RISE and self._settled():
-            if self._history[-1][0] - self.start_time < START_WAIT:
+        if pressing is not None and pressing < HELD_TORQUE_RISE:
+            now = self._history[-1][0]
+            if not self._settled():
+                # coasting on, pressing on nothing: a driver that holds the arm lets its gap
+                # pass a ceiling before it comes to rest, and a moving arm's torque shows
+                # its acceleration besides any press; judged where it rests (COAST_WAIT)
+                if self._coasting_since is None:
+                    self._coasting_since = now
+                if now - self._coasting_since < COAST_WAIT:
+                    return Verdict.MOVING
+                return self._blocked(reason)
+            if now - self.start_time < START_WAIT:
                 # the controller may have taken it late, after the arm moved on a command
                 # before (settling from a block): its gap is then the delay, not a block
                 return Verdict.MOVING
@@ -704,12 +737,13 @@ class BlockDetector:
             return Verdict.NOT_EXECUTED
         return self._blocked(reason)
 
-    def _pressing(self) -> float | None:
+    def _pressing(self, either_way: bool = False) -> float | None:
         """
         Return how hard the arm presses toward the command now [Nm, L1]; None without efforts.
 
         The mean effort - g(q) of the last ``ENDS`` seconds, on the joints the command pulls
-        (beyond ``PRESS_TOLERANCE``), in the pull's direction only.  An arm blocked in joint
+        (beyond ``PRESS_TOLERANCE``), in the pull's direction only (``either_way``: both
+        directions, as the arm presses on anything there).  An arm blocked in joint
         impedance presses on what holds it with its spring, stiffness x the gap; one that
         stopped without touching anything presses on nothing: a driver whose guard holds
         the arm sends its measured position, which pulls nowhere.  Judged absolutely, not as
@@ -719,8 +753,8 @@ class BlockDetector:
         if len(self._torques) < HELD_SAMPLES:
             return None
         pull = self._pulled()
-        now = np.mean([torque for _, torque in self._torques], axis=0)
-        return float(np.clip(pull * now, 0.0, None).sum())
+        now = pull * np.mean([torque for _, torque in self._torques], axis=0)
+        return float(np.abs(now).sum() if either_way else np.clip(now, 0.0, None).sum())
 
     def _pulled(self) -> np.ndarray:
         """Return per joint which way the command pulls the arm (0: within PRESS_TOLERANCE)."""

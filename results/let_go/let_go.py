@@ -19,12 +19,17 @@ A driver whose command guard holds the arm (``guard_holds``: it sends the measur
 position) is tripped here at a random time per run (a joint's speed trips it on a real arm,
 too rarely to measure by), on the physics family scenes of seeds SEED..SEED+WORLDS-1 (every
 family), with five sets of the mock's faults, two trip times per scene and fault set,
-``informed``, offline.  Each run goes twice: with the detector's let-go test and without it
-(its pressing torque unknown, as without efforts: the detector before it).  Printed per
+``informed``, offline.  Each run goes twice: with the detector's let-go tests (an arm at
+rest short of its command, one that coasts past a ceiling, a command that never moved an arm
+pressing on nothing) and without them (every arm taken to press: the detector before them,
+as without efforts; 2026-12-07 fourth session the first, fifth session all three).  Printed per
 setting: the failures learned after the trip (none is real: the arm is held), the runs
 stopped on an arm that let go, and at every gap block of an arm that moved, before the
 trip, the torque it pressed toward its command with (``BlockDetector._pressing``; the test
-needs 5 Nm, ``HELD_TORQUE_RISE``) and how many of them were called let go; and which
+needs 5 Nm, ``HELD_TORQUE_RISE``) and how many of them were called let go, and at every
+retreat before the trip under which the arm never moved, the torque it pressed with either
+way (on anything: the retreat's spring, the command before) and how many were called not
+executed; and which
 commands and tests the failures after the trip were learned on, with the test.
 Usage: python results/let_go/let_go.py --seed 7000 --worlds 4   (the training worlds)
        python results/let_go/let_go.py --seed 9100 --worlds 4   (the evaluation worlds)
@@ -32,6 +37,7 @@ Usage: python results/let_go/let_go.py --seed 7000 --worlds 4   (the training wo
 
 import argparse
 from collections import Counter
+import math
 from multiprocessing import Pool
 
 import numpy as np
@@ -61,9 +67,12 @@ def _tripping_guard(robot: SimulatedRobot, sent: np.ndarray, moved: np.ndarray) 
 
 def _recorded_gap_block(self: detector.BlockDetector, reason: str) -> detector.Verdict:
     verdict = _gap_block(self, reason)
-    if self.started and not _state['robot'].guard_trips and verdict is not \
-            detector.Verdict.MOVING:
-        _state['blocks'].append((_pressing(self), verdict is detector.Verdict.NOT_EXECUTED))
+    if not _state['robot'].guard_trips and verdict is not detector.Verdict.MOVING:
+        if self.started:
+            _state['blocks'].append((_pressing(self), verdict is detector.Verdict.NOT_EXECUTED))
+        elif not self.expect_motion:
+            _state['retreats'].append((_pressing(self, either_way=True),
+                                       verdict is detector.Verdict.NOT_EXECUTED))
     return verdict
 
 
@@ -87,8 +96,10 @@ def kind(why: str) -> str:
 def one(job: tuple[str, dict, float, bool]) -> dict:
     """Run one scene with a trip at trip_at; let_go False: without the let-go test."""
     scene, faults, trip_at, let_go = job
-    _state.update(trip_at=trip_at, blocks=[])
-    detector.BlockDetector._pressing = _pressing if let_go else (lambda self: None)
+    _state.update(trip_at=trip_at, blocks=[], retreats=[])
+    # without: every arm presses (harder than any threshold), as the detector before it saw it
+    detector.BlockDetector._pressing = _pressing if let_go else \
+        (lambda self, either_way=False: math.inf)
     robot, physics = with_faults(faults, RobotSettings(seed=0, guard_holds=True))
     episode = run_physics_episode(scene, 'informed', seed=0, run_settings=RunSettings(),
                                   robot_settings=robot, physics_settings=physics,
@@ -97,7 +108,8 @@ def one(job: tuple[str, dict, float, bool]) -> dict:
             'after_trip': sum(f['t'] >= trip_at for f in episode.failures),
             'kinds': [kind(f['why']) for f in episode.failures if f['t'] >= trip_at],
             'stopped_let_go': 'let go of the command' in episode.message,
-            'blocks': [(p, let) for p, let in _state['blocks'] if p is not None]}
+            'blocks': [(p, let) for p, let in _state['blocks'] if p is not None],
+            'retreats': [(p, let) for p, let in _state['retreats'] if p is not None]}
 
 
 def main() -> None:
@@ -132,12 +144,15 @@ def main() -> None:
     kinds = Counter(k for r in results if r['let_go'] for k in r['kinds'])
     print('\nWith the test, the failures learned after the trip, by command and test: ' +
           ', '.join(f'{name} {count}' for name, count in kinds.most_common()))
-    blocks = [block for r in results if r['let_go'] for block in r['blocks']]
-    pressing = np.array([p for p, _ in blocks])
-    print(f'\nWith the test, gap blocks of an arm that moved, before the trip: {len(blocks)}; '
-          f'called let go: {sum(let for _, let in blocks)}; pressing toward the command '
-          f'[Nm, L1]: below 5 in {int((pressing < 5).sum())}, lowest five '
-          f'{np.round(np.sort(pressing)[:5], 1).tolist()}, median {np.median(pressing):.1f}')
+    for key, what, how in (('blocks', 'gap blocks of an arm that moved', 'toward the command'),
+                           ('retreats', 'retreats under which the arm never moved',
+                            'either way, on the joints the retreat pulls')):
+        blocks = [block for r in results if r['let_go'] for block in r[key]]
+        pressing = np.array([p for p, _ in blocks] or [np.nan])
+        print(f'\nWith the test, {what}, before the trip: {len(blocks)}; called let go or not '
+              f'executed: {sum(let for _, let in blocks)}; pressing {how} [Nm, L1]: below 5 '
+              f'in {int((pressing < 5).sum())}, lowest five '
+              f'{np.round(np.sort(pressing)[:5], 1).tolist()}, median {np.median(pressing):.1f}')
 
 
 if __name__ == '__main__':
