@@ -25,6 +25,7 @@ from probdis_ros.motion.detector import (
     external_torque,
     ExternalTorqueObserver,
     RETREAT_START_WAIT,
+    SETTLE_WINDOW,
     START_WAIT,
     Verdict,
 )
@@ -131,13 +132,16 @@ def test_the_torque_ceiling_needs_the_load_data_and_waits_without_efforts():
 @pytest.mark.parametrize('efforts, verdict', [
     ('held', Verdict.BLOCKED), ('held, noisy', Verdict.BLOCKED),
     ('idle', Verdict.NOT_EXECUTED), ('idle, noisy', Verdict.NOT_EXECUTED),
-    ('pushed against the pull', Verdict.NOT_EXECUTED), (None, Verdict.NOT_EXECUTED)])
+    ('pushed against the pull', Verdict.NOT_EXECUTED), ('fading', Verdict.NOT_EXECUTED),
+    (None, Verdict.NOT_EXECUTED)])
 def test_an_arm_that_never_moves_is_held_if_its_torques_rise_and_unrun_if_not(efforts, verdict):
     # a path from rest that should move A2 by 0.4 rad; the arm stays where it is.  Held by
     # something, the impedance's spring pulls it toward the command (200 Nm/rad x the gap);
     # with no controller running the command, its torques stay as they were (here 3 Nm off
     # for load data a little wrong, and noise of 1 Nm per sample and joint), or change the
-    # other way (a hand on the arm): no block to learn
+    # other way (a hand on the arm), or fade from a block's press against the pull (10 Nm at
+    # A2, down to 2 with a time constant of 0.1 s: a rise of 8 Nm toward the command that
+    # presses toward it by nothing, a driver that holds the arm): no block to learn
     gravity = GravityModel()
     rng = np.random.default_rng(0)
     times = np.linspace(0.0, 1.0, 11)
@@ -150,6 +154,8 @@ def test_an_arm_that_never_moves_is_held_if_its_torques_rise_and_unrun_if_not(ef
         noise = rng.normal(0.0, 1.0, 7) if 'noisy' in str(efforts) else 0.0
         effort = {'held': gravity(HELD) + spring + noise, 'idle': gravity(HELD) + 3.0 + noise,
                   'pushed against the pull': gravity(HELD) - spring,
+                  'fading': gravity(HELD) - np.array([0, 2.0 + 8.0 * math.exp(-t / 0.1), 0,
+                                                      0, 0, 0, 0]),
                   'None': None}[str(efforts).split(',')[0]]
         found = detector.update(t, HELD, external_torque(detector.settings, HELD, effort))
         if found is not Verdict.MOVING:
@@ -200,18 +206,21 @@ def test_an_arm_that_stops_on_its_way_is_blocked_if_it_presses_and_let_go_if_not
     ('held by its driver', 0.8, Verdict.NOT_EXECUTED),
     ('held by its driver, noisy', 2.5, Verdict.NOT_EXECUTED),
     ('slowed by a soft contact', 2.5, Verdict.BLOCKED), ('without efforts', 2.5, Verdict.BLOCKED),
-    ('creeping on', 2.5, Verdict.BLOCKED)])
+    ('pressing once waited for', 2.5, Verdict.BLOCKED), ('creeping on', 2.5, Verdict.BLOCKED),
+    ('coasting slowly', 1.5, Verdict.BLOCKED)])
 def test_an_arm_that_coasts_past_a_ceiling_is_judged_where_it_rests(arm, stop, verdict):
     # a path that moves A2 by 0.5 rad/s for 4 s; the arm follows it until stop, then coasts
     # to rest (its speed fading with a time constant of 0.4 s), so that its gap passes the
     # joint ceiling 0.75 s later while it still moves (0.07 rad/s).  Held by its driver, it
-    # presses on nothing: waited for until it rests, and let go of there.  Slowed by a soft
-    # contact, its spring presses it on the contact: blocked at the ceiling, as without
-    # efforts.  One that creeps on (0.1 rad/s) pressing on nothing never rests: blocked
-    # COAST_WAIT after the ceiling
+    # presses on nothing (3 Nm off for load data a little wrong): waited for until it rests,
+    # and let go of there.  Slowed by a soft contact, its spring presses it on the contact:
+    # blocked at the ceiling, as without efforts, and as soon as it presses once waited for
+    # (from 0.1 s after the ceiling).  One that creeps on (0.1 rad/s) keeps its speed: driven
+    # on, blocked within a window or two; one that coasts slowly (time constant 3 s) is
+    # waited for COAST_WAIT at most
     gravity = GravityModel()
     rng = np.random.default_rng(2)
-    speed, tau = 0.5, 0.4
+    speed, tau = 0.5, 3.0 if arm == 'coasting slowly' else 0.4
     times = np.linspace(0.0, 4.0, 41)
     command = JtcTrajectory(TrajectoryCommand(times, HELD + np.outer(times, [0, speed, 0, 0, 0,
                                                                              0, 0])),
@@ -228,17 +237,24 @@ def test_an_arm_that_coasts_past_a_ceiling_is_judged_where_it_rests(arm, stop, v
         pull = command.sample(t - settings.motion_delay)[0] - q
         if ceiling is None and pull[1] > limit:
             ceiling = t
+        presses = 'contact' in arm or (arm == 'pressing once waited for' and ceiling is not None
+                                       and t >= ceiling + 0.1)
         noise = rng.normal(0.0, 1.0, 7) if 'noisy' in arm else 0.0
         effort = None if arm == 'without efforts' else \
-            gravity(q) + noise + (200.0 * pull if 'contact' in arm else 3.0)
+            gravity(q) + noise + (200.0 * pull if presses else 3.0)
         found = detector.update(t, q, external_torque(settings, q, effort))
         if found is not Verdict.MOVING:
             break
     assert found is verdict, detector.reason
     assert ('let go of the command' in detector.reason) == (verdict is Verdict.NOT_EXECUTED)
     assert ceiling is not None
-    if arm == 'creeping on':
-        assert ceiling + COAST_WAIT - 0.02 < t < ceiling + COAST_WAIT + 0.2, detector.reason
+    if arm == 'coasting slowly':
+        assert ceiling + COAST_WAIT - 0.02 < t < ceiling + COAST_WAIT + 0.05, detector.reason
+    elif arm == 'creeping on':
+        assert ceiling + SETTLE_WINDOW - 0.02 < t < ceiling + 2 * SETTLE_WINDOW + 0.05, \
+            detector.reason
+    elif arm == 'pressing once waited for':
+        assert ceiling + 0.1 <= t < ceiling + 0.13, detector.reason
     elif verdict is Verdict.BLOCKED:
         assert 'above its ceiling' in detector.reason and t < ceiling + 0.1, detector.reason
     else:       # at rest (its speed under 0.05 rad/s), and START_WAIT after the start
@@ -246,27 +262,30 @@ def test_an_arm_that_coasts_past_a_ceiling_is_judged_where_it_rests(arm, stop, v
         assert max(stop + tau * math.log(10.0), START_WAIT) <= t < stop + 1.3, detector.reason
 
 
-@pytest.mark.parametrize('efforts, verdict', [
-    ('held', Verdict.BLOCKED), ('pressed by the command before', Verdict.BLOCKED),
-    (None, Verdict.BLOCKED), ('idle', Verdict.NOT_EXECUTED)])
-def test_a_retreat_held_from_its_start_is_blocked_as_soon_as_its_torque_rises(efforts, verdict):
-    # a retreat waits up to RETREAT_START_WAIT for a controller that takes it late; one held
-    # where it stands, its spring pulling toward the command, presses on meanwhile: blocked
-    # once the rise shows, not at the end of the wait.  One that the command before still
-    # presses on what blocked it (40 Nm away from the retreat), or without efforts, is
-    # blocked at the end of the wait.  One that presses on nothing either way (3 Nm off for
-    # load data a little wrong) is waited for as a path is: nothing holds it, and nothing
-    # runs the retreat once its gap passes a joint's ceiling (0.15 rad, at 0.48 s)
+@pytest.mark.parametrize('efforts, reach, verdict', [
+    ('held', 0.4, Verdict.BLOCKED), ('pressed by the command before', 0.4, Verdict.BLOCKED),
+    (None, 0.4, Verdict.BLOCKED), ('idle', 0.4, Verdict.NOT_EXECUTED),
+    ('idle', 0.12, Verdict.NOT_EXECUTED), ('held from 1 s', 0.12, Verdict.BLOCKED)])
+def test_a_retreat_held_from_its_start_is_blocked_as_soon_as_it_presses(efforts, reach, verdict):
+    # a retreat that moves A2 by reach in 1 s waits up to RETREAT_START_WAIT for a controller
+    # that takes it late; one held where it stands, its spring pulling toward the command,
+    # presses on meanwhile: blocked once the rise shows, not at the end of the wait.  One
+    # that the command before still presses on what blocked it (40 Nm away from the
+    # retreat), or without efforts, is blocked at the end of the wait.  One that presses on
+    # nothing either way (3 Nm off for load data a little wrong) is waited for as a path is:
+    # nothing holds it, and nothing runs the retreat once its gap passes a joint's ceiling
+    # (0.15 rad, at 0.48 s) or START_WAIT has passed (a short retreat); and one whose spring
+    # begins to pull later (1 s) is blocked as soon as it does
     gravity = GravityModel()
     times = np.linspace(0.0, 1.0, 11)
-    pull = np.outer(times, [0, 0.4, 0, 0, 0, 0, 0])
+    pull = np.outer(times, [0, reach, 0, 0, 0, 0, 0])
     command = JtcTrajectory(TrajectoryCommand(times, HELD + pull), HELD, np.zeros(7))
     detector = BlockDetector(command, 0.0, DetectorSettings(), expect_motion=False)
     found = Verdict.MOVING
     for t in np.arange(0.01, 3.0, 0.01):
         spring = 200.0 * (command.sample(t - detector.settings.motion_delay)[0] - HELD)
         effort = None if efforts is None else gravity(HELD) + {
-            'held': spring, 'idle': 3.0,
+            'held': spring, 'idle': 3.0, 'held from 1 s': spring if t >= 1.0 else 3.0,
             'pressed by the command before': np.array([0, -40.0, 0, 0, 0, 0, 0])}[efforts]
         found = detector.update(t, HELD, external_torque(detector.settings, HELD, effort))
         if found is not Verdict.MOVING:
@@ -274,8 +293,12 @@ def test_a_retreat_held_from_its_start_is_blocked_as_soon_as_its_torque_rises(ef
     assert found is verdict, detector.reason
     if efforts == 'held':
         assert t < 0.4, detector.reason
+    elif efforts == 'held from 1 s':
+        assert 1.0 <= t < 1.03, detector.reason
     elif efforts == 'idle':
-        assert 'pressing on nothing' in detector.reason and 0.45 < t < 0.5, detector.reason
+        assert 'pressing on nothing' in detector.reason, detector.reason
+        assert 0.45 < t < 0.5 if reach > 0.3 else START_WAIT <= t < START_WAIT + 0.02, \
+            detector.reason
     else:       # waited for nearly all of RETREAT_START_WAIT
         assert 0.9 * RETREAT_START_WAIT < t <= RETREAT_START_WAIT + 0.01, detector.reason
 

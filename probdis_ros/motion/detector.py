@@ -25,7 +25,9 @@ joint impedance follows its command with a lag) with where it is.  The L1 gap
   ``settle_time`` ago (the paper's test); or at once when the gap exceeds ``gap_ceiling`` in
   total or ``joint_gap_ceiling`` at one joint: with joint stiffness K the arm then presses
   with about K x gap, and a compliant arm whose unblocked joints keep moving may never stall
-  before the trajectory ends (DESIGN.md "Facts: a physics-simulated iiwa");
+  before the trajectory ends (DESIGN.md "Facts: a physics-simulated iiwa"); but not where
+  the efforts show the arm still slowing down and pressing on nothing (``COAST_WAIT``,
+  below);
 * **blocked** at once, where the joint states carry the measured torques, when the
   external-torque estimate (:class:`ExternalTorqueObserver`: the efforts less the arm's
   gravity and dynamics) exceeds ``torque_ceiling`` at a joint (0: off; it needs the load
@@ -72,8 +74,9 @@ joint impedance follows its command with a lag) with where it is.  The L1 gap
   position) presses on nothing.  That is no block to learn either; it is waited for until
   ``START_WAIT`` has passed since the command began (a controller that took the command late,
   unseen because the arm still settled from the command before, leaves such a gap).  An arm
-  whose gap passes a ceiling while it still moves, pressing by less than that, is waited for
-  up to ``COAST_WAIT`` to come to rest and judged there: a held arm coasts on.
+  whose gap block (a ceiling, the stall's or the end's test) comes while it still moves,
+  pressing by less than that, is waited for while it slows down, up to ``COAST_WAIT``, to
+  come to rest and judged there: a held arm coasts on.
 
 A command that starts **pressed in** (``pressed_start``: JTC started it from its last
 command, ``interpolate_from_desired_state``, while the arm was held short of that command
@@ -122,7 +125,8 @@ ENDS = 0.05
 START_WAIT = 2.0
 #: A retreat (or a path from an arm pressed against something), which need not move the
 #: arm, is waited for this long [s] at most: an arm pressed from two sides after a block
-#: is pressed the longer the longer it is waited for (a stall is seen after stall_time).
+#: is pressed the longer the longer it is waited for (a stall is seen after stall_time);
+#: one that presses on nothing (with efforts) is waited for as a path, ``START_WAIT``.
 RETREAT_START_WAIT = 0.5
 #: [Nm, L1 over the joints] an arm that has not moved while its external-torque estimate rose
 #: this much toward the command since the command began (means over ENDS) is held by
@@ -134,8 +138,9 @@ RETREAT_START_WAIT = 0.5
 #: that holds it presses nowhere.
 HELD_TORQUE_RISE = 5.0
 #: An arm that moved and passed a gap block while still moving, pressing toward its command
-#: by less than ``HELD_TORQUE_RISE``, is waited for this long [s] at most to come to rest
-#: (where the let-go test judges it): a driver that holds the arm lets it coast on.
+#: by less than ``HELD_TORQUE_RISE``, is waited for this long [s] at most, while it slows
+#: down, to come to rest (where the let-go test judges it): a driver that holds the arm
+#: lets it coast on.
 COAST_WAIT = 1.0
 #: [1/s] the external-torque observer follows a change at this rate (time constant 40 ms):
 #: quick beside a block's build-up, slow enough to smooth the efforts' noise
@@ -456,7 +461,9 @@ class BlockDetector:
         self._first_torques: list[np.ndarray] = []
         self._torques: deque[tuple[float, np.ndarray]] = deque()
         self._pull = np.zeros(0)        # the command less the arm at the last sample [rad]
-        self._coasting_since: float | None = None  # a gap block first waited for rest [s]
+        # a gap block waited for while the arm coasts: (since, last seen, L1 speed [rad/s] at
+        # the last judgement, judged at) [s]
+        self._coast: tuple[float, float, float, float] | None = None
         self.onset: Onset | None = None
         self.reason = ''
 
@@ -676,7 +683,11 @@ class BlockDetector:
         return True
 
     def _gap_block(self, reason: str) -> Verdict:
-        """Return a block seen in the gap, or NOT_EXECUTED: the arm never moved, or let go."""
+        """
+        Return a block seen in the gap, NOT_EXECUTED (the arm never moved, or let go), or MOVING.
+
+        MOVING: waited for, a controller that may take the command late, an arm that coasts.
+        """
         if not self.started:
             s = self.settings
             within = (not s.gap_ceiling or self.gap <= s.gap_ceiling) and \
@@ -720,10 +731,8 @@ class BlockDetector:
             if not self._settled():
                 # coasting on, pressing on nothing: a driver that holds the arm lets its gap
                 # pass a ceiling before it comes to rest, and a moving arm's torque shows
-                # its acceleration besides any press; judged where it rests (COAST_WAIT)
-                if self._coasting_since is None:
-                    self._coasting_since = now
-                if now - self._coasting_since < COAST_WAIT:
+                # its acceleration besides any press; judged where it rests
+                if self._coasting(now):
                     return Verdict.MOVING
                 return self._blocked(reason)
             if now - self.start_time < START_WAIT:
@@ -736,6 +745,32 @@ class BlockDetector:
                            f'gap; it let go of the command')
             return Verdict.NOT_EXECUTED
         return self._blocked(reason)
+
+    def _coasting(self, now: float) -> bool:
+        """
+        Tell whether an arm past a gap block, pressing on nothing, may coast on to rest.
+
+        Only while it slows down, its L1 speed (over ``SETTLE_WINDOW``) lower at each
+        window than at the one before, and for ``COAST_WAIT`` at most: an arm that keeps its
+        speed is driven on, and should its efforts not show a contact (a sensor that reads
+        nothing), the command would press on for the whole wait.  A wait broken for longer
+        than a window (the gap back under its ceiling, the arm at rest) starts afresh.
+        """
+        recent = [sample for sample in self._history if sample[0] >= now - SETTLE_WINDOW]
+        speed = float(np.abs(slope_of(np.array([when for when, _ in recent]),
+                                      np.array([q for _, q in recent]))).sum())
+        if self._coast is None or now - self._coast[1] > SETTLE_WINDOW:
+            self._coast = (now, now, speed, now)    # since, last seen, speed, judged at
+            return True
+        since, _, before, judged = self._coast
+        if now - since >= COAST_WAIT:
+            return False
+        if now - judged >= SETTLE_WINDOW:
+            if speed >= before:
+                return False
+            before, judged = speed, now
+        self._coast = (since, now, before, judged)
+        return True
 
     def _pressing(self, either_way: bool = False) -> float | None:
         """
