@@ -589,13 +589,17 @@ class BlockDetector:
         after the end bounds the wait); over a longer window the noise estimate would take
         the arm's deceleration for noise.
         """
+        times, positions = self._last_window()
+        if len(times) < SETTLE_SAMPLES:
+            return False
+        motion, noise = motion_over(times, positions)
+        return motion <= self.settings.stall_motion + noise
+
+    def _last_window(self) -> tuple[np.ndarray, np.ndarray]:
+        """Return the times and positions of the states of the last ``SETTLE_WINDOW``."""
         now = self._history[-1][0]
         recent = [sample for sample in self._history if sample[0] >= now - SETTLE_WINDOW]
-        if len(recent) < SETTLE_SAMPLES:
-            return False
-        times = np.array([when for when, _ in recent])
-        motion, noise = motion_over(times, np.array([q for _, q in recent]))
-        return motion <= self.settings.stall_motion + noise
+        return np.array([when for when, _ in recent]), np.array([q for _, q in recent])
 
     def _released(self, now: float, t: float, desired: np.ndarray, measured: np.ndarray,
                   ended: bool) -> bool:
@@ -756,9 +760,7 @@ class BlockDetector:
         nothing), the command would press on for the whole wait.  A wait broken for longer
         than a window (the gap back under its ceiling, the arm at rest) starts afresh.
         """
-        recent = [sample for sample in self._history if sample[0] >= now - SETTLE_WINDOW]
-        speed = float(np.abs(slope_of(np.array([when for when, _ in recent]),
-                                      np.array([q for _, q in recent]))).sum())
+        speed = float(np.abs(slope_of(*self._last_window())).sum())
         if self._coast is None or now - self._coast[1] > SETTLE_WINDOW:
             self._coast = (now, now, speed, now)    # since, last seen, speed, judged at
             return True
