@@ -225,10 +225,12 @@ def test_a_path_from_a_still_command_that_jtc_takes_late_starts_without_a_step(
 def test_a_run_whose_driver_guard_holds_the_arm_stops_on_the_path_it_let_go_of():
     # messages 0.2 s late: the arm springs back from a block it pressed longer, at 1.34 rad/s
     # on A4 (limit 1.31); a driver whose guard holds instead of ending the session then
-    # holds the arm for good while it runs and reports.  The next path moves the arm a
-    # little, then it rests short of its command pressing on nothing: no block, the arm let
-    # go of it.  The run stops there, learning nothing of it, and names the driver's log
-    # line; restarted, the driver frees the arm and the run goes on to the goal
+    # holds the arm for good while it runs and reports.  The arm coasts to rest short of the
+    # command it was tripped in (here the retreat after the block; the path after it, when
+    # the detector needed the arm at rest as its gap passed the ceiling), pressing on
+    # nothing: no block, the arm let go of it.  The run stops there, learning nothing of it,
+    # and names the driver's log line; restarted, the driver frees the arm and the run goes
+    # on to the goal
     from probdis_ros.physics.family_scenes import family_scene_name
     from probdis_ros.physics.simulated_robot import DRIVER_STOPPED, GUARD_HELD
 
