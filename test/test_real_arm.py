@@ -222,7 +222,7 @@ def test_a_path_from_a_still_command_that_jtc_takes_late_starts_without_a_step(
         assert robot.command_speed_peak > 1.0
 
 
-def test_a_run_whose_driver_guard_holds_the_arm_stops_on_the_path_it_let_go_of():
+def test_a_run_whose_driver_guard_holds_the_arm_stops_on_the_command_it_let_go_of():
     # messages 0.2 s late: the arm springs back from a block it pressed longer, at 1.34 rad/s
     # on A4 (limit 1.31); a driver whose guard holds instead of ending the session then
     # holds the arm for good while it runs and reports.  The arm coasts to rest short of the
