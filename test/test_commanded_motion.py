@@ -146,6 +146,21 @@ def test_free_motion_through_noise_is_never_a_stall(seed):
     assert verdict is Verdict.DONE
 
 
+@pytest.mark.parametrize('seed', range(3))
+def test_an_arm_lagging_a_little_more_than_motion_delay_did_not_take_its_command_late(seed):
+    # 30 ms more lag than motion_delay, through 5 mrad of noise: within LATE_TAKE, so the
+    # command's start stays where it was sent (moved on, the detector would compare the arm
+    # with its command that much later, and every gap would read that much smaller)
+    settings = DetectorSettings()
+    jtc = trajectory()
+    detector = BlockDetector(jtc, 0.0, settings)
+
+    def arm(t):
+        return jtc.sample(t - settings.motion_delay - 0.03)[0]
+    _, verdict = judge(detector, arm, jtc.duration + 2.0, seed)
+    assert verdict is Verdict.DONE and detector.late == 0.0, detector.late
+
+
 @pytest.mark.parametrize('seed', range(4))
 def test_a_command_from_a_noisy_state_taken_late_is_judged_from_when_it_began(seed):
     # the command starts at one state with 5 mrad of noise, the arm (lagging 0.06 s) follows
