@@ -790,8 +790,8 @@ class BlockDetector:
         if len(self._torques) < HELD_SAMPLES:
             return None
         pull = self._pulled()
-        now = pull * np.mean([torque for _, torque in self._torques], axis=0)
-        return float(np.abs(now).sum() if either_way else np.clip(now, 0.0, None).sum())
+        pulled = pull * np.mean([torque for _, torque in self._torques], axis=0)
+        return float(np.abs(pulled).sum() if either_way else np.clip(pulled, 0.0, None).sum())
 
     def _pulled(self) -> np.ndarray:
         """Return per joint which way the command pulls the arm (0: within PRESS_TOLERANCE)."""
