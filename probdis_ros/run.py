@@ -893,7 +893,8 @@ class Run:
         # (its retreat blocked) may be blocked at once
         expect = path is not None and not self.pressed and pressed_start is None
         self.detector = BlockDetector(self.trajectory, now, self.settings.detection,
-                                      expect_motion=expect, pressed_start=pressed_start)
+                                      expect_motion=expect, pressed_start=pressed_start,
+                                      limits=(self.arm.lower, self.arm.upper))
         self.rest_at = None
 
     def _completed(self, config: np.ndarray) -> None:

@@ -46,6 +46,7 @@ from probdis_ros.motion.jtc import (
 from probdis_ros.motion.profiles import from_state
 from probdis_ros.motion.state_check import BadJointStateError, StateCheck
 from probdis_ros.planning.disentangle import Disentangler, failure_from_block
+from probdis_ros.planning.prob_rrt import ROBOT_JOINT_MARGIN
 from probdis_ros.run import (
     Learned,
     MAX_VELOCITY_SCALING,
@@ -210,6 +211,76 @@ def test_the_motion_measure_averages_the_noise_out():
     moving = still + np.outer(times, np.full(7, 0.05))
     motion, noise = motion_over(times, moving)
     assert abs(motion - 7 * 0.05 * times[-1]) < noise and motion > noise
+
+
+# ------------------------------------------------------------------ a joint pushed to its limit
+
+LIMITS = (ARM.lower, ARM.upper)
+#: A4 runs to the planner's margin from its lower limit
+NEAR_A4 = Q0 + np.array([0.5, 0.2, 0.0, ARM.lower[3] + ROBOT_JOINT_MARGIN - Q0[3], 0.0, 0.0, 0.0])
+
+
+def pushed_a4(jtc, settings, after, speed=0.08):
+    """Return the arm: its command motion_delay late, A4 pushed toward its lower limit."""
+    def arm(t):
+        q = jtc.sample(t - settings.motion_delay)[0].copy()
+        q[3] -= speed * max(0.0, t - after)
+        return q
+    return arm
+
+
+def test_a_joint_pushed_toward_its_limit_is_blocked_before_it_gets_there():
+    # clutter-seed8014 on the physics mock: A4 run to its margin while A2 pressed on
+    # something and A4 was bent on toward its limit at about 0.08 rad/s, its gap below
+    # every ceiling, until it passed the limit (a KUKA stops there)
+    settings = DetectorSettings()
+    jtc = trajectory(Q0, NEAR_A4)
+    after = 0.6 * jtc.duration
+    arm = pushed_a4(jtc, settings, after)
+    detector = BlockDetector(jtc, 0.0, settings, expect_motion=True, limits=LIMITS)
+    t, verdict = watch(detector, arm, jtc.duration + 2.0, np.random.default_rng(0), 5e-4)
+    room = arm(t)[3] - ARM.lower[3]
+    assert verdict is Verdict.BLOCKED and 'A4 pushed toward its limit' in detector.reason, \
+        detector.reason
+    assert 0.01 < room < settings.limit_room, room
+    # without the arm's limits, the gap tests alone let it run into its limit
+    blind = BlockDetector(jtc, 0.0, settings, expect_motion=True)
+    t, verdict = watch(blind, arm, jtc.duration + 2.0, np.random.default_rng(0), 5e-4)
+    assert t is None or arm(t)[3] < ARM.lower[3], (t, verdict, blind.reason)
+
+
+@pytest.mark.parametrize('seed', range(3))
+@pytest.mark.parametrize('inertia', [0.0, 1.5])
+def test_an_arm_that_runs_close_to_a_limit_and_back_is_not_pushed(seed, inertia):
+    # to a goal 12 mrad from A4's limit (within the margin: a start or goal may be) and back,
+    # on time or lagging 0.12 s in joint impedance (ahead of its command as the command turns
+    # back), through 0.5 mrad of noise
+    settings = DetectorSettings()
+    limits = RunSettings(velocity_scaling=0.7).limits(ARM)
+    near = NEAR_A4 - np.array([0.0, 0.0, 0.0, ROBOT_JOINT_MARGIN - 0.012, 0.0, 0.0, 0.0])
+    motion = from_state(Q0, None, np.array([Q0, near, Q0]), limits)
+    jtc = JtcTrajectory(motion.command_from_start, Q0, None, 0.0)
+    arm = impedance(lambda t: jtc.sample(t)[0], inertia) if inertia else follows(jtc, settings)
+    detector = BlockDetector(jtc, 0.0, settings, expect_motion=True, limits=LIMITS)
+    _, verdict = watch(detector, arm, jtc.duration + 2.0, np.random.default_rng(seed), 5e-4)
+    assert verdict is Verdict.DONE, detector.reason
+
+
+def test_an_arm_at_rest_by_a_limit_whose_command_leaves_late_is_not_pushed():
+    # a start within the margin (0.005 rad from A4's limit), the command away from it taken
+    # 0.3 s late: the arm stays behind its command, toward the limit, pushed by nothing
+    settings = DetectorSettings()
+    start = NEAR_A4 - np.array([0.0, 0.0, 0.0, ROBOT_JOINT_MARGIN - 0.005, 0.0, 0.0, 0.0])
+    jtc = trajectory(start, Q0)
+    controller = trajectory(start, Q0)      # the detector moves jtc's on a late take
+    detector = BlockDetector(jtc, 0.0, settings, expect_motion=True, limits=LIMITS)
+    late = 0.3
+
+    def arm(t):
+        return controller.sample(t - late - settings.motion_delay)[0]
+    _, verdict = watch(detector, arm, jtc.duration + late + 2.0, np.random.default_rng(0),
+                       5e-4)
+    assert verdict is Verdict.DONE and detector.late > 0.2, (detector.reason, detector.late)
 
 
 # ------------------------------------------------------------------ a command nothing runs

@@ -152,6 +152,19 @@ def test_an_episode_commands_only_what_the_limits_allow_and_retreats_stay_clear(
         assert ARM.within_limits(positions).all()
 
 
+def test_a_joint_pushed_toward_its_limit_is_blocked_before_it_and_the_run_gets_out():
+    # clutter-seed8014 (fresh family worlds): A4, run to its margin while A2 pressed on the
+    # clutter, was bent on 2 mrad past its limit, where the state check refuses a state (and
+    # a real iiwa's axis range monitoring stops the robot): the run ended there, not out
+    episode = run_physics_episode('clutter-seed8014', 'informed', seed=0,
+                                  run_settings=RunSettings(velocity_scaling=0.2),
+                                  robot_settings=RobotSettings(jtc_start='measured', seed=0))
+    assert episode.success, episode.message
+    assert any('A4 pushed toward its limit' in f['why'] for f in episode.failures)
+    room = np.minimum(episode.configs - ARM.lower, ARM.upper - episode.configs)
+    assert room.min() > 0.01, room.min()
+
+
 def test_an_arm_that_lags_more_than_motion_delay_is_not_taken_for_an_echo():
     # the kinematic arm lags the driver's command by its servo (50 ms) beyond the filter, so
     # with motion_delay 0.04 the detector takes some commands as taken late and moves their

@@ -37,6 +37,13 @@ joint impedance follows its command with a lag) with where it is.  The L1 gap
   into the retreat after it, so a command that need not move the arm (``expect_motion``
   false) judges a joint by the ceiling only once its torque has come below it (the gap
   tests judge it meanwhile);
+* **blocked** at once when a joint is pushed toward its limit (``limits`` given): measured
+  within ``limit_room`` of it, and nearer to it by more than :data:`LIMIT_PUSH` than both
+  its command (beyond the speed allowance) and where it stood when the command began.  The
+  planner keeps its paths ``joint_margin`` from every limit, and an arm in joint impedance
+  that presses on something while its other joints move on is bent past its command by tens
+  of milliradians before a gap ceiling passes; pressed past an axis limit, KUKA's axis range
+  monitoring stops the robot (RESULTS "A joint pushed to its limit");
 * **done** when the trajectory has ended, the gap to its last point is at most ``d_dist``,
   and the arm has come to rest (or ``settle_time`` has passed since the end);
 * **echo** when the measured positions have followed the moving command as the driver
@@ -170,6 +177,11 @@ ECHO_JOINTS = slice(0, 4)
 #: A joint whose command starts more than this [rad] beyond the measured position is pressed
 #: in; it is back within reach when its command has come to within this of the arm.
 PRESS_TOLERANCE = 0.01
+#: A joint within ``limit_room`` of its limit is pushed toward it when it is nearer to the limit
+#: than its command (less the speed allowance) and than where it stood when the command began,
+#: by more than this [rad]: well above the joint states' noise, and more than an arm that
+#: lags its command by ``motion_delay`` leaves at a turn near the limit.
+LIMIT_PUSH = 0.01
 
 
 def noise_of(positions: np.ndarray) -> np.ndarray:
@@ -251,6 +263,7 @@ class DetectorSettings:
     echo_speed: float = 0.05        # commanded L1 speed [rad/s] that counts as moving
     driver_tau: float = DRIVER_FILTER_TAU  # the driver's command filter [s], for the echo
     torque_ceiling: float = 0.0     # external torque [Nm] at a joint that is a block; 0: off
+    limit_room: float = 0.02        # a joint pushed to within this of its limit: a block [rad]
     load_mass: float = 0.0          # the grasped load for that estimate [kg] ...
     load_com: tuple[float, float, float] = (0.0, 0.0, 0.0)  # ... at this point [m], flange frame
 
@@ -261,7 +274,8 @@ class DetectorSettings:
             if not 0 < getattr(self, name) < math.inf:
                 raise ValueError(f'{name} must be a positive number, got {getattr(self, name)}')
         for name in ('motion_delay', 'gap_ceiling', 'joint_gap_ceiling', 'echo_time',
-                     'speed_allowance', 'torque_ceiling', 'load_mass', 'driver_tau'):
+                     'speed_allowance', 'torque_ceiling', 'limit_room', 'load_mass',
+                     'driver_tau'):
             if not 0 <= getattr(self, name) < math.inf:
                 raise ValueError(f'{name} must be a number >= 0, got {getattr(self, name)}')
         if len(self.load_com) != 3:
@@ -417,13 +431,18 @@ class BlockDetector:
     Watches one trajectory: feed it (time, measured configuration) samples.
 
     ``path`` is anything with ``at(t)`` / ``sample(t)`` and ``duration`` in seconds from
-    ``start_time`` (a :class:`~probdis_ros.motion.jtc.JtcTrajectory`).
+    ``start_time`` (a :class:`~probdis_ros.motion.jtc.JtcTrajectory`).  ``limits``: the
+    arm's (lower, upper) joint limits [rad], for the test of a joint pushed toward one (None:
+    no such test).
     """
 
     def __init__(self, path, start_time: float, settings: DetectorSettings | None = None,
                  expect_motion: bool = False,
-                 pressed_start: tuple[np.ndarray, np.ndarray] | None = None) -> None:
+                 pressed_start: tuple[np.ndarray, np.ndarray] | None = None,
+                 limits: tuple[np.ndarray, np.ndarray] | None = None) -> None:
         self.path = path
+        self._limits = None if limits is None else \
+            (np.asarray(limits[0], dtype=float), np.asarray(limits[1], dtype=float))
         # (the command's start position, the measured one) of a command that starts pressed
         # in: which joints, and in which direction, must come back before the gap counts
         self._pressed: np.ndarray | None = None
@@ -534,6 +553,9 @@ class BlockDetector:
                 return self._blocked(f'joint A{joint + 1} external torque '
                                      f'{abs(self.external_torque[joint]):.1f} Nm above '
                                      f'{s.torque_ceiling:.1f} Nm')
+        pushed = self._pushed_to_limit(measured, desired, allowance)
+        if pushed:
+            return self._blocked(pushed)
         if ended and self.gap <= s.d_dist:
             if self._should_move():
                 if self._history[-1][0] - self.start_time < START_WAIT:
@@ -562,6 +584,36 @@ class BlockDetector:
                 return self._gap_block(f'stalled with gap {self.gap:.3f} rad (moved {motion:.3f} '
                                        f'rad in {times[-1] - times[0]:.2f} s)')
         return Verdict.MOVING
+
+    def _pushed_to_limit(self, measured: np.ndarray, desired: np.ndarray,
+                         allowance: np.ndarray) -> str:
+        """
+        Name a joint pushed to within ``limit_room`` of its limit ('' if none).
+
+        Nearer to the limit than its command, beyond the lag that fast motion leaves (an arm
+        that lags is ahead of a command that turns back from near the limit), and than where
+        it stood when the command began (an arm at rest near a limit, whose command leaves it
+        late, is pushed by nothing), each by more than ``LIMIT_PUSH``; all of it through the
+        noise (``NOISE_SIGMAS`` standard deviations of a joint's states).
+        """
+        room_limit = self.settings.limit_room
+        if not room_limit or self._limits is None:
+            return ''
+        lower, upper = self._limits
+        outward = np.where(upper - measured < measured - lower, 1.0, -1.0)
+        room = np.minimum(measured - lower, upper - measured)
+        beyond = np.minimum((measured - desired) * outward - allowance,
+                            (measured - np.mean(self._first, axis=0)) * outward)
+        if not np.any((room < room_limit) & (beyond > LIMIT_PUSH)):
+            return ''
+        noise = NOISE_SIGMAS * noise_of(np.array([q for _, q in self._history]))
+        pushed = (room + noise < room_limit) & (beyond - noise > LIMIT_PUSH)
+        if not pushed.any():
+            return ''
+        joint = int(np.argmin(np.where(pushed, room, np.inf)))
+        return (f'joint A{joint + 1} pushed toward its limit: {room[joint]:.4f} rad from it, '
+                f'{(measured[joint] - desired[joint]) * outward[joint]:.4f} rad past its '
+                f'command')
 
     def _should_move(self) -> bool:
         """

@@ -34,8 +34,8 @@ TRAJECTORY_TOPIC = '/lbr/joint_trajectory_controller/joint_trajectory'
 #: The detector's settings the planner node has as parameters (the others keep their
 #: defaults there; the offline runs take them all).
 DETECTOR_FIELDS = ('d_dist', 'stall_time', 'stall_motion', 'settle_time', 'motion_delay',
-                   'gap_ceiling', 'joint_gap_ceiling', 'onset_gap', 'echo_time',
-                   'driver_tau', 'torque_ceiling', 'load_mass', 'load_com')
+                   'gap_ceiling', 'joint_gap_ceiling', 'limit_room', 'onset_gap',
+                   'echo_time', 'driver_tau', 'torque_ceiling', 'load_mass', 'load_com')
 
 #: The mock's pace on simulated time, at most this times the wall clock: at 5, on a 2-core
 #: machine under load, the planner fell behind the simulation (retreats went unwatched and

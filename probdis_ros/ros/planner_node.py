@@ -231,6 +231,9 @@ PARAMETERS = {
                                                '~ stiffness x gap); 0: off', 0.0, 10.0)),
     'joint_gap_ceiling': (DETECT.joint_gap_ceiling, _float("one joint's gap [rad] that is a "
                                                            'block at once; 0: off', 0.0, 10.0)),
+    'limit_room': (DETECT.limit_room, _float(
+        'a joint pushed (off its command, toward its limit) to within this [rad] of its limit '
+        'is a block at once; 0: off', 0.0, 0.5)),
     'onset_gap': (DETECT.onset_gap, _float('a block began where the gap last rose above this '
                                            '[rad]', 0.001, 1.0)),
     'echo_time': (DETECT.echo_time, _float('seconds of motion that follows the command as '

@@ -290,6 +290,7 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
     settings = result.settings = given or detector_settings({}, overrides)
     observer = ExternalTorqueObserver(settings)         # the live run's estimate
     states = StateCheck(names, arm.lower, arm.upper, arm.velocity_limits)
+    limits = (arm.lower, arm.upper)
     measured = None
     measured_velocity = None
     early = None               # a command recorded before the first joint state
@@ -370,7 +371,7 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
             # late is judged from when it began)
             detector = BlockDetector(timed, t, settings, expect_motion=kind == 'path' and
                                      not pressed and pressed_start is None,
-                                     pressed_start=pressed_start)
+                                     pressed_start=pressed_start, limits=limits)
             continue
         # the live planner's gate, and its dating: by stamp on the recording's clock
         received, stamp = t + t0, stamp_seconds(msg)
@@ -393,8 +394,8 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
             else:
                 running = (JtcTrajectory(command, q, measured_velocity, sent), sent)
                 # a path from a free arm, as the live run's first one
-                detector, kind = (BlockDetector(running[0], sent, settings, expect_motion=True),
-                                  'path')
+                detector, kind = (BlockDetector(running[0], sent, settings, expect_motion=True,
+                                                limits=limits), 'path')
                 result.paths += 1
                 result.problems.append(f'{sent:.3f} s: command before any joint state: '
                                        f'started from the first one, at {t:.3f} s')
