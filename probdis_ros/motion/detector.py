@@ -38,7 +38,8 @@ joint impedance follows its command with a lag) with where it is.  The L1 gap
   false) judges a joint by the ceiling only once its torque has come below it (the gap
   tests judge it meanwhile);
 * **blocked** at once when a joint is pushed toward its limit (``limits`` given): measured
-  within ``limit_room`` of it, and nearer to it by more than :data:`LIMIT_PUSH` than both
+  within ``limit_room`` of it (or so near that it would be there :data:`LIMIT_HORIZON` on
+  at its speed toward it), and nearer to it by more than :data:`LIMIT_PUSH` than both
   its command (beyond the speed allowance) and where it stood when the command began.  The
   planner keeps its paths ``joint_margin`` from every limit, and an arm in joint impedance
   that presses on something while its other joints move on is bent past its command by tens
@@ -182,6 +183,13 @@ PRESS_TOLERANCE = 0.01
 #: by more than this [rad]: well above the joint states' noise, and more than an arm that
 #: lags its command by ``motion_delay`` leaves at a turn near the limit.
 LIMIT_PUSH = 0.01
+#: ... and within ``limit_room`` of it once pushed on this long [s] at the speed at which it
+#: moves toward it beyond its command (over ``SETTLE_WINDOW``): a blocked arm comes to rest
+#: that much further on (A3 pushed at 0.14 rad/s past a command at rest on the physics mock
+#: went 13 mrad on after its block, as the retreat braked the arm).
+LIMIT_HORIZON = 0.15
+#: Only joints this near [rad] their limits are judged so (the rest cost nothing).
+LIMIT_NEAR = 0.3
 
 
 def noise_of(positions: np.ndarray) -> np.ndarray:
@@ -553,7 +561,7 @@ class BlockDetector:
                 return self._blocked(f'joint A{joint + 1} external torque '
                                      f'{abs(self.external_torque[joint]):.1f} Nm above '
                                      f'{s.torque_ceiling:.1f} Nm')
-        pushed = self._pushed_to_limit(measured, desired, allowance)
+        pushed = self._pushed_to_limit(measured, desired, velocity, allowance)
         if pushed:
             return self._blocked(pushed)
         if ended and self.gap <= s.d_dist:
@@ -586,15 +594,21 @@ class BlockDetector:
         return Verdict.MOVING
 
     def _pushed_to_limit(self, measured: np.ndarray, desired: np.ndarray,
-                         allowance: np.ndarray) -> str:
+                         velocity: np.ndarray, allowance: np.ndarray) -> str:
         """
         Name a joint pushed to within ``limit_room`` of its limit ('' if none).
+
+        Or one that would be there ``LIMIT_HORIZON`` on, pushed on as fast as it moves toward
+        it beyond its command's velocity (``velocity``: the command stops, the push need not
+        at once).
 
         Nearer to the limit than its command, beyond the lag that fast motion leaves (an arm
         that lags is ahead of a command that turns back from near the limit), and than where
         it stood when the command began (an arm at rest near a limit, whose command leaves it
-        late, is pushed by nothing), each by more than ``LIMIT_PUSH``; all of it through the
-        noise (``NOISE_SIGMAS`` standard deviations of a joint's states).
+        late, is pushed by nothing), each by more than ``LIMIT_PUSH`` beyond ``NOISE_SIGMAS``
+        standard deviations of the joint's noise: one state's noise is no push (its room is
+        taken as measured: the push guards it, and a noisy arm near a limit is judged no
+        later).
         """
         room_limit = self.settings.limit_room
         if not room_limit or self._limits is None:
@@ -604,10 +618,12 @@ class BlockDetector:
         room = np.minimum(measured - lower, upper - measured)
         beyond = np.minimum((measured - desired) * outward - allowance,
                             (measured - np.mean(self._first, axis=0)) * outward)
-        if not np.any((room < room_limit) & (beyond > LIMIT_PUSH)):
+        if not np.any((room < LIMIT_NEAR) & (beyond > LIMIT_PUSH)):
             return ''
+        times, positions = self._last_window()
+        speed = np.maximum((slope_of(times, positions) - velocity) * outward, 0.0)
         noise = NOISE_SIGMAS * noise_of(np.array([q for _, q in self._history]))
-        pushed = (room + noise < room_limit) & (beyond - noise > LIMIT_PUSH)
+        pushed = (room - speed * LIMIT_HORIZON < room_limit) & (beyond - noise > LIMIT_PUSH)
         if not pushed.any():
             return ''
         joint = int(np.argmin(np.where(pushed, room, np.inf)))
