@@ -614,11 +614,14 @@ class BlockDetector:
         if not room_limit or self._limits is None:
             return ''
         lower, upper = self._limits
-        outward = np.where(upper - measured < measured - lower, 1.0, -1.0)
         room = np.minimum(measured - lower, upper - measured)
+        near = room < LIMIT_NEAR
+        if not near.any():          # as nearly always: nothing more to compute per state
+            return ''
+        outward = np.where(upper - measured < measured - lower, 1.0, -1.0)
         beyond = np.minimum((measured - desired) * outward - allowance,
                             (measured - np.mean(self._first, axis=0)) * outward)
-        if not np.any((room < LIMIT_NEAR) & (beyond > LIMIT_PUSH)):
+        if not np.any(near & (beyond > LIMIT_PUSH)):
             return ''
         times, positions = self._last_window()
         speed = np.maximum((slope_of(times, positions) - velocity) * outward, 0.0)
