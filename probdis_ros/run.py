@@ -47,7 +47,9 @@ nothing learned.
 What it refuses: a configuration that is not finite or lies outside the joint limits by more
 than ``LIMIT_TOLERANCE`` is never taken (the host's :mod:`probdis_ros.motion.state_check`
 refuses it first; a run that gets one anyway stops as for any refused joint state), and a
-start within ``goal_tolerance`` of the goal ends at once, succeeded, without a motion.  A run
+start within ``goal_tolerance`` of the goal ends at once, succeeded, without a motion.  Its
+hosts refuse a goal within the planner's ``joint_margin`` of a joint limit
+(:func:`goal_problem`).  A run
 that ends while a path is being planned cancels the planning (:class:`CancellablePlanner`:
 before the next planner call; the host drops the result of the one under way).
 """
@@ -330,6 +332,22 @@ def usable(arm: Arm, config: np.ndarray) -> str:
     if not arm.within_limits(config, LIMIT_TOLERANCE)[0]:
         return f'outside the joint limits: {np.round(config, 4).tolist()}'
     return ''
+
+
+def goal_problem(arm: Arm, goal: np.ndarray, joint_margin: float) -> str:
+    """
+    Return why a run may not drive the arm to goal ('' if it may).
+
+    The goal must lie ``joint_margin`` (the planner's, kept by every other via point) inside
+    the joint limits: an arm in joint impedance overshoots its command as it comes to rest
+    (2 mrad on the physics mock), and an iiwa stops at an axis limit.
+    """
+    problem = arm.limit_problem(goal, room=joint_margin)
+    if problem and arm.joint_outside(goal) is None:       # inside, but within the margin
+        return (f'{problem} (joint_margin): an arm in joint impedance overshoots its command '
+                f'as it comes to rest, and the robot stops at an axis limit; move the goal '
+                f'in or lower joint_margin')
+    return problem
 
 
 def rest_command(arm: Arm, limits: MotionLimits, q: np.ndarray,

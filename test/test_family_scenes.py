@@ -29,6 +29,8 @@ from probdis_ros.physics.family_scenes import (
 )
 from probdis_ros.physics.oracle import first_collision
 from probdis_ros.planning import Method
+from probdis_ros.planning.prob_rrt import ROBOT_JOINT_MARGIN
+from probdis_ros.run import goal_problem
 from probdis_ros.sim.families import FAMILIES, random_family_world
 import pytest
 
@@ -82,7 +84,7 @@ def test_the_start_is_free_in_mujoco_and_the_straight_move_is_blocked(family):
 def test_an_item_grazing_the_start_is_made_to_clear_the_object():
     world = random_family_world('clutter', 1)      # an item 1.4 mm from the flange point
     scene = family_scene(world)
-    assert scene.description.endswith('1 made to clear the object at the start')
+    assert '; 1 made to clear the object at the start' in scene.description
     assert not PhysicsIiwa(scene).in_collision(scene.start)
     index, kept = next((i, o) for i, o in enumerate(scene.obstacles)
                        if o.shape.size[0] < world.obstacles[i].radius)
@@ -90,6 +92,22 @@ def test_an_item_grazing_the_start_is_made_to_clear_the_object():
     raw = replace(scene, obstacles=(*scene.obstacles[:index], full,
                                     *scene.obstacles[index + 1:]))
     assert PhysicsIiwa(raw).in_collision(scene.start)
+
+
+def test_a_goal_near_a_joint_limit_is_moved_in_to_the_planner_nodes_margin():
+    world = random_family_world('closed_box', 8007)     # the goal's A1 0.9 mrad from its limit
+    scene, arm = family_scene(world), world.arm
+    assert 'lbr_A1' in goal_problem(arm, world.goal, ROBOT_JOINT_MARGIN)
+    assert goal_problem(arm, scene.goal, ROBOT_JOINT_MARGIN) == ''
+    moved = scene.goal - world.goal
+    assert np.flatnonzero(moved).tolist() == [0]
+    np.testing.assert_allclose(min(scene.goal[0] - arm.lower[0], arm.upper[0] - scene.goal[0]),
+                               ROBOT_JOINT_MARGIN, atol=1e-12)
+    assert f"goal moved {abs(moved[0]):.4f} rad in from lbr_A1's limit" in scene.description
+    assert not PhysicsIiwa(scene).in_collision(scene.goal)
+    # an episode refuses the world's own goal, as the planner node does
+    with pytest.raises(ValueError, match=r'goal lbr_A1 .* nearer than 0.035 \(joint_margin\)'):
+        run_physics_episode(replace(scene, goal=world.goal), 'probabilistic', max_paths=1)
 
 
 def test_a_gated_wall_opens_to_a_turned_object_and_closes_again():
@@ -161,7 +179,6 @@ def test_an_offline_physics_episode_plans_as_the_planner_node_does_with_what_it_
     # caller gives others; the seed chooses the planner's draws
     from probdis_ros.model.table import ROBOT_TABLE
     from probdis_ros.planning.disentangle import DEFAULT_MIN_RETREAT, ROBOT_GOAL_TOLERANCE
-    from probdis_ros.planning.prob_rrt import ROBOT_JOINT_MARGIN
 
     scene = SCENES['hook_bar']
     loop = run_physics_episode(scene, 'probabilistic', seed=3, max_paths=1).loop

@@ -279,6 +279,15 @@ def test_bad_goals_are_refused(ros, tmp_path):
         assert not result.successful and 'goal' in result.reason
     assert 'below the table' in result.reason
     assert np.allclose(node.get_parameter('goal').value, GOAL)
+    # 1 mrad inside A1's limit: the arm coming to rest there in joint impedance overshoots it
+    near = GOAL.copy()
+    near[0] = node.arm.lower[0] + 0.001
+    result = node.set_parameters([Parameter('goal', value=near.tolist())])[0]
+    assert not result.successful and 'A1' in result.reason
+    assert 'nearer than 0.035 (joint_margin): an arm in joint impedance overshoots' in \
+        result.reason
+    assert node.set_parameters([Parameter('joint_margin', value=0.0005)])[0].successful
+    assert node.set_parameters([Parameter('goal', value=near.tolist())])[0].successful
 
 
 def test_a_joint_range_narrows_the_planner_and_refuses_goals_and_ranges_outside(ros, tmp_path):

@@ -155,13 +155,27 @@ class Arm(ABC):
                 return j
         return None
 
-    def limit_problem(self, config: np.ndarray) -> str:
-        """Return which joint of config is not finite or outside its limits, or '' if none."""
+    def limit_problem(self, config: np.ndarray, room: float = 0.0) -> str:
+        """
+        Return which joint of config is not finite or outside its limits, or '' if none.
+
+        With ``room`` > 0, also a joint nearer than that to one of its limits.
+        """
         j = self.joint_outside(config)
-        if j is None:
+        config = self.as_batch(config)[0]
+        if j is not None:
+            return (f'{self.joint_names[j]} at {config[j]:.4g} rad is outside '
+                    f'its limits [{self.lower[j]:.4f}, {self.upper[j]:.4f}]')
+        if room <= 0:
             return ''
-        return (f'{self.joint_names[j]} at {self.as_batch(config)[0, j]:.4g} rad is outside '
-                f'its limits [{self.lower[j]:.4f}, {self.upper[j]:.4f}]')
+        below, above = config - self.lower, self.upper - config
+        near = np.minimum(below, above)
+        j = int(np.argmin(near))
+        if near[j] >= room:
+            return ''
+        limit = self.lower[j] if below[j] <= above[j] else self.upper[j]
+        return (f'{self.joint_names[j]} at {config[j]:.4f} rad lies {near[j]:.4f} rad from its '
+                f'limit {limit:.4f}, nearer than {room:g}')
 
     def random_configurations(self, rng: np.random.Generator, n: int,
                               margin: float = 0.0) -> np.ndarray:

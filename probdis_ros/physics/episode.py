@@ -49,7 +49,7 @@ from probdis_ros.planning.disentangle import (
     ROBOT_GOAL_TOLERANCE,
 )
 from probdis_ros.planning.prob_rrt import ROBOT_JOINT_MARGIN
-from probdis_ros.run import Learned, Phase, PlanFrom, Propose, Run, RunSettings, Send
+from probdis_ros.run import goal_problem, Learned, Phase, PlanFrom, Propose, Run, RunSettings, Send
 
 #: [s] of simulated time the arm rests, held, once the run stopped on the silent driver and
 #: before the operator restarts it (``restarts``): a real restart takes longer, and the arm
@@ -159,6 +159,9 @@ def run_physics_episode(scene: str, method: str | Method = 'probabilistic', seed
     ``confirm_after``: with ``run_settings.confirm_paths``, the operator confirms each
     planned path this long [s, simulated] after it is proposed (the arm waits at rest).
     ``c_fail``: the map's C_FAIL (None: the method's).
+
+    A scene whose goal the planner node would refuse (within ``rrt.joint_margin`` of a joint
+    limit, :func:`~probdis_ros.run.goal_problem`) raises ValueError.
     """
     if restarts < 0:
         raise ValueError(f'restarts must be >= 0, got {restarts}')
@@ -177,6 +180,9 @@ def run_physics_episode(scene: str, method: str | Method = 'probabilistic', seed
     fmap = method.failure_map(arm.task_space, c_fail)
     # the planner node's default margin, so that offline runs plan as the node does
     rrt = rrt or RRTSettings(joint_margin=ROBOT_JOINT_MARGIN)
+    problem = goal_problem(arm, scene_doc.goal, rrt.joint_margin)
+    if problem:                         # refused as the node refuses it
+        raise ValueError(f'scene {scene_doc.name}: goal {problem}')
     planner = method.planner(arm, rrt)
 
     def start_run(paths: int) -> tuple[Disentangler, Run]:

@@ -41,6 +41,13 @@ point clears by less than ``OBJECT_RADIUS + CLEARANCE`` (in ``clutter`` an item 
 it; a disc's plane may pass within millimetres) is made to clear it: a ball shrinks, a disc
 moves back along its normal, by the shortfall; the scene's description counts them.
 
+The arm's goal keeps the planner node's ``joint_margin`` (``ROBOT_JOINT_MARGIN``) from
+every joint limit, as the node requires of a goal (:func:`probdis_ros.run.goal_problem`: an
+arm in joint impedance overshoots its goal as it comes to rest): a world's goal nearer to a
+limit (13 of the 100 worlds of seeds 8000-8019; the kinematic worlds' goals are drawn
+anywhere within the limits) is moved in to the margin, by at most 0.035 rad on a joint; the
+scene's description says so.
+
 Scenes are named as the worlds, ``<family>-seed<S>``; :func:`load_scene` draws such a name
 when no file of that name exists, so ``--scene closed_box-seed3`` works wherever a scene does.
 """
@@ -52,6 +59,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 from probdis_ros.physics.scene import Gate, GraspedObject, Primitive, Scene, SceneObstacle
+from probdis_ros.planning.prob_rrt import ROBOT_JOINT_MARGIN
 
 if TYPE_CHECKING:
     from probdis_ros.sim.families import FamilyWorld
@@ -132,9 +140,15 @@ def family_scene(world: FamilyWorld) -> Scene:
     description = (f'entanglement family world {world.name}: {len(converted)} obstacles '
                    f'({gated} gated, tolerance {world.orientation_tolerance:.3f}); '
                    f'{moved} made to clear the object at the start')
+    arm = world.arm
+    goal = np.clip(world.goal, arm.lower + ROBOT_JOINT_MARGIN, arm.upper - ROBOT_JOINT_MARGIN)
+    if not np.array_equal(goal, world.goal):
+        j = int(np.argmax(np.abs(goal - world.goal)))
+        description += (f'; goal moved {abs(goal[j] - world.goal[j]):.4f} rad in from '
+                        f"{arm.joint_names[j]}'s limit, to the planner node's joint_margin")
     grasped = GraspedObject((Primitive('sphere', (OBJECT_RADIUS,), np.zeros(3),
                                        name='object'),), OBJECT_MASS)
-    return Scene(world.name, world.start.copy(), world.goal.copy(),
+    return Scene(world.name, world.start.copy(), goal,
                  tuple(o for o, _ in converted), grasped, description,
                  object_only=True)
 

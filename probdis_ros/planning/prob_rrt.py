@@ -36,6 +36,8 @@ Joint margin (beyond the paper): samples, new nodes and the smoothing's moves ke
 via point asks the arm to go right to a limit.  A start or goal inside the true limits but
 within the margin is accepted: its tree grows from it into the shrunk box (a new node is
 clipped into it), so the start and goal are the only via points that may lie outside it.
+(A run on the arm refuses such a goal, :func:`probdis_ros.run.goal_problem`: the arm
+overshoots a goal as it comes to rest.)
 ``joint_margin = 0`` is the paper's planner, and gives the plans of before the margin bit
 for bit.
 * RewireNeighbours (RRT*): the new node takes the cheapest parent among its neighbours, and

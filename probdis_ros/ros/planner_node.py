@@ -95,6 +95,7 @@ from probdis_ros.ros.messages import stamp_seconds, trajectory_msg
 from probdis_ros.ros.node_main import refuse_unknown_parameters, run_node
 from probdis_ros.ros.recorder import BagRecorder, message_types, RECORDING_SUFFIX
 from probdis_ros.run import (
+    goal_problem,
     Learned,
     MAX_VELOCITY_SCALING,
     MIN_VELOCITY_SCALING,
@@ -574,7 +575,8 @@ class PlannerNode(Node):
             return (f'{self.arm.joint_names[j]} at {goal[j]:.6f} rad is outside the joint '
                     f'limits as KUKA has them (whole degrees, which the driver keeps): keep it '
                     f'{DRIVER_LIMIT_INSET:g} rad inside the URDF limits')
-        return self.arm.table_problem(goal)
+        return goal_problem(self.arm, goal, self.get_parameter('joint_margin').value) or \
+            self.arm.table_problem(goal)
 
     def _run_settings(self, changes: dict | None = None) -> RunSettings:
         """
