@@ -171,7 +171,7 @@ class Arm(ABC):
         below, above = config - self.lower, self.upper - config
         near = np.minimum(below, above)
         j = int(np.argmin(near))
-        if near[j] >= room:
+        if near[j] >= room - 1e-12:         # (a configuration clipped to the room is in it)
             return ''
         limit = self.lower[j] if below[j] <= above[j] else self.upper[j]
         return (f'{self.joint_names[j]} at {config[j]:.4f} rad lies {near[j]:.4f} rad from its '
