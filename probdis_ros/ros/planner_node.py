@@ -105,6 +105,7 @@ from probdis_ros.run import (
     rest_command,
     Run,
     RunSettings,
+    scaling_warning,
     Send,
     StatusChanged,
     Withdrawn,
@@ -900,6 +901,10 @@ class PlannerNode(Node):
                    f'real arm")')
             self.get_logger().warning(lag)
             unchecked = '; '.join(filter(None, (unchecked, lag)))
+        fast = scaling_warning(self.get_parameter('velocity_scaling').value)
+        if fast:
+            self.get_logger().warning(fast)
+            unchecked = '; '.join(filter(None, (unchecked, fast)))
         planner = self._make_planner()
         self.fmap.c_fail = float(self.get_parameter('c_fail').value)
         loop = Disentangler(self.arm, planner, np.asarray(goal, dtype=float), self.fmap,
