@@ -745,6 +745,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
     from probdis_ros.planning import Method, RRTSettings
     from probdis_ros.planning.prob_rrt import ROBOT_JOINT_MARGIN
     from probdis_ros.planning.seeds import PLANNER, stream
+    from probdis_ros.run import goal_problem
 
     if args.plan_time is not None:
         _positive(args.plan_time, '--plan-time')
@@ -776,6 +777,9 @@ def cmd_plan(args: argparse.Namespace) -> int:
     settings = RRTSettings(iterations=args.iterations, delta=args.delta,
                            plan_time=args.plan_time or 0.0,
                            joint_margin=0.0 if setting == '2d' else ROBOT_JOINT_MARGIN)
+    problem = goal_problem(arm, ends[1], settings.joint_margin)      # as the node refuses it
+    if problem:
+        raise UsageError(f'--goal {problem}')
     planner = method.planner(arm, settings, args.length_weight)
     plan = planner.plan(ends[0], ends[1], fmap, stream(args.seed, PLANNER))
     if plan is None:

@@ -143,11 +143,12 @@ class Phase(str, Enum):
 #: the URDF's limit.  Impacts on rigid obstacles add spikes beyond that: near clutter the
 #: default 0.2 keeps a wide margin.
 MAX_VELOCITY_SCALING = 0.7
-#: Above this velocity scaling, impacts in clutter spike a joint past its URDF velocity limit
-#: and the driver's command guard ends the session: on the physics mock's family worlds of
-#: seeds 9000-9019, 1, 9 and 21 runs of 100 at 0.3, 0.4 and 0.5, none at 0.2 (RESULTS "How
-#: fast in clutter").  The planner node warns at ``~/start`` above it.
-CLUTTER_SCALING = 0.3
+#: Faster than this velocity scaling (the default), impacts in clutter spike a joint past its
+#: URDF velocity limit and the driver's command guard ends the session: on the physics mock's
+#: family worlds of seeds 9000-9019, 1, 9 and 21 runs of 100 at 0.3, 0.4 and 0.5, none at
+#: 0.2 with the measured start (RESULTS "How fast in clutter").  The planner node warns at
+#: ``~/start`` above it.
+CLUTTER_SCALING = DEFAULT_VELOCITY_SCALING
 #: The slowest velocity scaling the node takes (slower, a path of a metre takes minutes).
 MIN_VELOCITY_SCALING = 0.01
 #: With a desired start, a retreat first brings JTC's command back from where it pressed in to
@@ -345,8 +346,8 @@ def scaling_warning(velocity_scaling: float) -> str:
         return ''
     return (f'velocity_scaling {velocity_scaling:g}: in clutter, impacts this fast spike a '
             f"joint past its velocity limit and the driver's command guard ends the session "
-            f'(on the physics mock 9 and 21 of 100 family runs at 0.4 and 0.5, none at 0.2); '
-            f'keep at most {CLUTTER_SCALING:g} near clutter')
+            f'(on the physics mock 1, 9 and 21 of 100 family runs at 0.3, 0.4 and 0.5, none '
+            f'at {CLUTTER_SCALING:g}); near clutter keep {CLUTTER_SCALING:g}')
 
 
 def goal_problem(arm: Arm, goal: np.ndarray, joint_margin: float) -> str:
@@ -360,8 +361,8 @@ def goal_problem(arm: Arm, goal: np.ndarray, joint_margin: float) -> str:
     problem = arm.limit_problem(goal, room=joint_margin)
     if problem and arm.joint_outside(goal) is None:       # inside, but within the margin
         return (f'{problem} (joint_margin): an arm in joint impedance overshoots its command '
-                f'as it comes to rest, and the robot stops at an axis limit; move the goal '
-                f'in or lower joint_margin')
+                f'as it comes to rest (about 2 mrad), and the robot stops at an axis limit; '
+                f'move the goal at least joint_margin inside the limit')
     return problem
 
 

@@ -186,6 +186,10 @@ def test_plan_keeps_the_iiwa_above_its_table_as_the_planner_node_does(probdis, t
     outside = ['4.0', *start[1:]]
     result = probdis(*args[:4], *outside, *args[11:], check=False)
     assert result.returncode == 2 and 'A1 at 4 rad is outside its limits' in result.stderr
+    near = ['2.966', *high[1:]]             # 1.1 mrad inside A1's limit, as the node refuses
+    result = probdis(*args[:12], *near, '--json', check=False)
+    assert result.returncode == 2 and 'lbr_A1 at 2.96600 rad lies 0.00106 rad from its ' \
+        'limit 2.96706, nearer than 0.035 (joint_margin)' in result.stderr, result.stderr
     # the node's margin from the joint limits: informed's probes from a wrist near its limit
     # put via points on it (the driver ends its session there); a map of 19 failures about
     # the workspace and 10 on the straight way

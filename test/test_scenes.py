@@ -99,14 +99,21 @@ def test_scene_check_tells_a_fit_scene_from_unfit_ones(probdis, tmp_path):
                 'position': ARM.positions(np.array(doc['start']))[0].tolist()}])):
         files[name] = tmp_path / f'{name}.yaml'
         files[name].write_text(yaml.safe_dump({**doc, 'name': name, 'obstacles': obstacles}))
+    # a goal 1 mrad inside A1's limit, which the planner node refuses
+    near = [float(ARM.lower[0]) + 0.001, *doc['goal'][1:]]
+    files['near'] = tmp_path / 'near.yaml'
+    files['near'].write_text(yaml.safe_dump({**doc, 'name': 'near', 'goal': near,
+                                             'obstacles': []}))
     result = probdis('scene', 'check', *map(str, files.values()), check=False)
     assert result.returncode == 1, result.stderr
-    lines = dict(line.split(': ', 1) for line in result.stdout.splitlines()[:3])
+    lines = dict(line.split(': ', 1) for line in result.stdout.splitlines()[:4])
+    assert lines[str(files['near'])].startswith('NOT FIT: the goal lbr_A1 at -2.96606 rad '
+                                                'lies 0.00100 rad from its limit'), lines
     assert lines[str(files['maze'])].startswith('ok: the straight move is blocked')
     assert lines[str(files['empty'])] == \
         'NOT FIT: the straight move to the goal is free: nothing to disentangle'
     assert lines[str(files['inside'])].startswith('NOT FIT: the start collides')
-    assert result.stdout.splitlines()[-1] == '1 of 3 scenes entangled and solvable'
+    assert result.stdout.splitlines()[-1] == '1 of 4 scenes entangled and solvable'
     # --json: the way out itself, from the start to the goal
     doc = json.loads(probdis('scene', 'check', str(files['maze']), '--json').stdout)
     assert doc['ok'] and doc['problems'] == []

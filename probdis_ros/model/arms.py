@@ -174,8 +174,8 @@ class Arm(ABC):
         if near[j] >= room - 1e-12:         # (a configuration clipped to the room is in it)
             return ''
         limit = self.lower[j] if below[j] <= above[j] else self.upper[j]
-        return (f'{self.joint_names[j]} at {config[j]:.4f} rad lies {near[j]:.4f} rad from its '
-                f'limit {limit:.4f}, nearer than {room:g}')
+        return (f'{self.joint_names[j]} at {config[j]:.5f} rad lies {near[j]:.5f} rad from its '
+                f'limit {limit:.5f}, nearer than {room:g}')
 
     def random_configurations(self, rng: np.random.Generator, n: int,
                               margin: float = 0.0) -> np.ndarray:

@@ -46,7 +46,8 @@ every joint limit, as the node requires of a goal (:func:`probdis_ros.run.goal_p
 arm in joint impedance overshoots its goal as it comes to rest): a world's goal nearer to a
 limit (13 of the 100 worlds of seeds 8000-8019; the kinematic worlds' goals are drawn
 anywhere within the limits) is moved in to the margin, by at most 0.035 rad on a joint; the
-scene's description says so.
+scene's description says so (naming the joint moved most), and a move that is not free of
+the obstacles and the table raises ValueError.
 
 Scenes are named as the worlds, ``<family>-seed<S>``; :func:`load_scene` draws such a name
 when no file of that name exists, so ``--scene closed_box-seed3`` works wherever a scene does.
@@ -143,6 +144,11 @@ def family_scene(world: FamilyWorld) -> Scene:
     arm = world.arm
     goal = np.clip(world.goal, arm.lower + ROBOT_JOINT_MARGIN, arm.upper - ROBOT_JOINT_MARGIN)
     if not np.array_equal(goal, world.goal):
+        # the world was certified solvable to its own goal: the move in must be free too
+        if not (arm.above_table(goal)[0] and
+                world.compliant_arm().path_is_free(np.array([world.goal, goal]))):
+            raise ValueError(f'{world.name}: its goal moved in to the joint margin is not '
+                             f'free (of the obstacles or the table)')
         j = int(np.argmax(np.abs(goal - world.goal)))
         description += (f'; goal moved {abs(goal[j] - world.goal[j]):.4f} rad in from '
                         f"{arm.joint_names[j]}'s limit, to the planner node's joint_margin")

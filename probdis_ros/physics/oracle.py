@@ -33,6 +33,8 @@ import numpy as np
 from probdis_ros.model import iiwa_arm
 from probdis_ros.physics.arm import PhysicsIiwa
 from probdis_ros.physics.scene import Scene
+from probdis_ros.planning.prob_rrt import ROBOT_JOINT_MARGIN
+from probdis_ros.run import goal_problem
 
 DEFAULT_RESOLUTION = 0.02   # rad, per joint, between checked configurations
 #: RRT-Connect iterations per attempt of :func:`check_scene`: a 5 mm ball threading the
@@ -190,11 +192,12 @@ class SceneCheck:
     blocked_after_m: float | None
     way_out: np.ndarray | None
     seconds: float
+    goal_room: str = ''         # why the planner node would refuse the goal ('' : it takes it)
 
     @property
     def problems(self) -> list[str]:
         """Return what makes the scene unfit, one phrase each (empty: fit)."""
-        found = []
+        found = [f'the goal {self.goal_room}'] if self.goal_room else []
         if not self.start_free:
             found.append('the start collides')
         if not self.goal_free:
@@ -218,7 +221,8 @@ def check_scene(scene: Scene, rng: np.random.Generator, iterations: int = CHECK_
     Check a scene as the tests check the shipped ones (``probdis scene check``).
 
     Start and goal free, the straight move blocked, and a way out found by the planner that
-    sees the scene (with ``clearance`` [m] to spare along it).
+    sees the scene (with ``clearance`` [m] to spare along it); and a goal the planner node
+    takes (``joint_margin`` from every joint limit).
     """
     t0 = time.perf_counter()
     arm = PhysicsIiwa(scene)
@@ -233,5 +237,6 @@ def check_scene(scene: Scene, rng: np.random.Generator, iterations: int = CHECK_
     if start_free and goal_free:
         way = find_free_path(arm, scene.start, scene.goal, rng, iterations,
                              resolution=resolution, clearance=clearance)
+    room = goal_problem(iiwa_arm(), scene.goal, ROBOT_JOINT_MARGIN)
     return SceneCheck(scene.name, start_free, goal_free, blocked, way,
-                      time.perf_counter() - t0)
+                      time.perf_counter() - t0, room)

@@ -556,7 +556,8 @@ class PlannerNode(Node):
                                            joint_upper=tuple(upper)))
         return lower, upper
 
-    def _goal_problem(self, goal) -> str:
+    def _goal_problem(self, goal, changes: dict | None = None) -> str:
+        """Return why goal is refused ('' if not), with the range parameters ``changes``."""
         goal = np.asarray(goal, dtype=float)
         if _unset(goal):
             return 'is not set: give the 7 joint positions [rad], -p goal:=[a1, ..., a7]'
@@ -565,7 +566,7 @@ class PlannerNode(Node):
         outside = self.arm.limit_problem(goal)
         if outside:
             return outside
-        lower, upper = self._joint_range()
+        lower, upper = self._joint_range(changes)
         outside = (goal < lower - 1e-9) | (goal > upper + 1e-9)
         if outside.any():
             j = int(np.argmax(outside))
@@ -576,8 +577,8 @@ class PlannerNode(Node):
             return (f'{self.arm.joint_names[j]} at {goal[j]:.6f} rad is outside the joint '
                     f'limits as KUKA has them (whole degrees, which the driver keeps): keep it '
                     f'{DRIVER_LIMIT_INSET:g} rad inside the URDF limits')
-        return goal_problem(self.arm, goal, self.get_parameter('joint_margin').value) or \
-            self.arm.table_problem(goal)
+        margin = (changes or {}).get('joint_margin', self.get_parameter('joint_margin').value)
+        return goal_problem(self.arm, goal, margin) or self.arm.table_problem(goal)
 
     def _run_settings(self, changes: dict | None = None) -> RunSettings:
         """
@@ -623,8 +624,8 @@ class PlannerNode(Node):
             except ValueError as err:
                 return SetParametersResult(successful=False, reason=f'planner: {err}')
         for param in params:
-            if param.name == 'goal':
-                problem = self._goal_problem(param.value)
+            if param.name == 'goal':      # (with the range set in the same call)
+                problem = self._goal_problem(param.value, ranges)
                 if problem:
                     return SetParametersResult(successful=False, reason=f'goal {problem}')
             # use_sim_time too: switched during a run, the node's clock would read /clock's
