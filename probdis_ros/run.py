@@ -72,6 +72,7 @@ from probdis_ros.motion.detector import (
     DetectorSettings,
     ExternalTorqueObserver,
     slope_of,
+    StatePeriod,
     Verdict,
 )
 from probdis_ros.motion.jtc import (
@@ -436,6 +437,7 @@ class Run:
         self.pressed = False                             # the last motion ended blocked
         self.blocked_still = False                       # ... without having moved the arm
         self._recent: deque[tuple[float, np.ndarray]] = deque()     # (time, measured)
+        self.state_period = StatePeriod()       # the joint states' period, for the detectors
         self.latencies: list[float] = []
         # the latest any command of the run began against motion_delay [s]: JTC took it late,
         # or the arm lags more than motion_delay (the detector shifts such a command)
@@ -500,6 +502,7 @@ class Run:
             self.bad_joint_state(problem)
             return
         self.measured = np.clip(np.asarray(config, dtype=float), self.arm.lower, self.arm.upper)
+        self.state_period.add(now)
         # observed at every state with efforts (it follows the arm's motion), kept while active
         external = None if effort is None else \
             self.torque_observer.update(now, self.measured, velocity, effort)
@@ -928,7 +931,8 @@ class Run:
         expect = path is not None and not self.pressed and pressed_start is None
         self.detector = BlockDetector(self.trajectory, now, self.settings.detection,
                                       expect_motion=expect, pressed_start=pressed_start,
-                                      limits=(self.arm.lower, self.arm.upper))
+                                      limits=(self.arm.lower, self.arm.upper),
+                                      state_period=self.state_period)
         self.rest_at = None
 
     def _completed(self, config: np.ndarray) -> None:

@@ -27,6 +27,7 @@ import re
 
 import numpy as np
 from probdis_ros.model import iiwa_arm
+from probdis_ros.motion import detector as detector_module
 from probdis_ros.motion import state_check
 from probdis_ros.motion.detector import (
     BlockDetector,
@@ -36,6 +37,7 @@ from probdis_ros.motion.detector import (
     MotionWatch,
     RETREAT_START_WAIT,
     START_WAIT,
+    StatePeriod,
     Verdict,
 )
 from probdis_ros.motion.jtc import (
@@ -1109,6 +1111,109 @@ def sender_starved(start, until, end, catch_up=0.1, tick=0.02):
         now += tick if t < now else 0.0
     sent += [(tau, tau) for tau in np.arange(t + 1.0 / RATE, end, 1.0 / RATE)]
     return [(stamp, at + 0.0005) for stamp, at in sent]
+
+
+def taken_late_after_sparse_states(late, seed):
+    """
+    Return the verdict on a path from rest at scaling 0.5, taken late, its states sparse.
+
+    As a starved mock sends them: 100 Hz until the path is sent, then 0.1 s apart (one
+    state per tick, each a catch-up of CATCH_UP) until the controller takes the path late,
+    then 100 Hz again; 1 mrad of noise.
+    """
+    rng = np.random.default_rng(seed)
+    limits = RunSettings(velocity_scaling=0.5).limits(ARM)
+    start = Q0 + rng.normal(0.0, 0.001, 7)
+    velocity = rng.normal(0.0, 0.001, 7) * 100.0 * np.sqrt(2.0)    # differenced at 100 Hz
+    command = from_state(start, velocity, np.array([start, Q1]), limits).command
+    jtc = JtcTrajectory(command, start, velocity, 0.0)
+    controller = JtcTrajectory(command, start, velocity, 0.0)   # the detector moves jtc's
+    period = StatePeriod()
+    for t in np.arange(-0.3, 0.0, 0.01):
+        period.add(t)
+    detector = BlockDetector(jtc, 0.0, DetectorSettings(), expect_motion=True,
+                             state_period=period)
+    arm = impedance(lambda t: controller.sample(t - late)[0] if t >= late else Q0, 1.0)
+    sent = -1.0
+    for t in np.arange(0.0, jtc.duration + late + 2.0, STEP):
+        q = arm(t)
+        if t < 0.06 or t - sent < (0.1 if t < late else 0.01) - 1e-9:
+            continue
+        sent = t
+        period.add(t)
+        verdict = detector.update(t, q + rng.normal(0.0, 0.001, 7))
+        if verdict is not Verdict.MOVING:
+            return verdict
+    return Verdict.MOVING
+
+
+def test_states_held_up_while_a_path_is_taken_late_give_no_false_block():
+    # the noise test's CI failure, retaken with a mock stopped for 0.05-0.6 s at a time:
+    # 7 false blocks in the bags of 5 of 12 runs, none when they are replayed now
+    seeds = range(6)
+    for late in (0.2, 0.25):
+        assert all(taken_late_after_sparse_states(late, seed) is Verdict.DONE
+                   for seed in seeds)
+    # taken later than the detector waits for at this speed: not executed (or seen to
+    # begin in time); a block would be a failure learned where there is none
+    later = [taken_late_after_sparse_states(0.4, seed) for seed in seeds]
+    assert set(later) <= {Verdict.NOT_EXECUTED, Verdict.DONE}, later
+
+
+@pytest.mark.parametrize('gap_rule', [True, False])
+def test_a_moving_arm_is_not_stalled_on_states_held_up_on_their_way(gap_rule):
+    # a fast path that turns, the arm 45 ms behind the detector's model (its gap past
+    # d_dist), states 0.1 s apart for 0.6 s at a time (a mock catching up): judged across
+    # the gaps, second differences hold the arm's acceleration over 0.1 s, and an arm that
+    # moved 0.2-0.4 rad in 0.3 s was called stalled
+    settings = DetectorSettings()
+    limits = RunSettings(velocity_scaling=0.7).limits(ARM)
+    via = Q0 + np.array([0.9, -0.3, 0.6, 0.1, -0.4, 0.2, 0.8])
+    far = Q0 + np.array([1.0, 0.5, 0.4, 0.8, 0.5, -0.6, 1.0])
+    motion = from_state(Q0, None, np.array([Q0, via, far, Q0]), limits)
+    jtc = JtcTrajectory(motion.command_from_start, Q0, None, 0.0)
+    verdicts = []
+    with pytest.MonkeyPatch.context() as patch:
+        if not gap_rule:
+            patch.setattr(detector_module, 'STATE_GAP', np.inf)
+        for begin in np.arange(0.25, 0.7, 0.05) * jtc.duration:
+            detector = BlockDetector(jtc, 0.0, settings, expect_motion=True)
+            rng = np.random.default_rng(0)
+            arm = follows(jtc, replace(settings, motion_delay=settings.motion_delay + 0.045))
+            verdicts.append(watch_sparse(detector, arm, jtc.duration + 2.0, rng,
+                                         (begin, begin + 0.6)))
+    if gap_rule:
+        assert set(verdicts) == {Verdict.DONE}, verdicts
+    else:
+        assert Verdict.BLOCKED in verdicts, verdicts
+
+
+def watch_sparse(detector, arm, until, rng, sparse):
+    """Feed arm(t) with 1 mrad of noise at 100 Hz, 10 Hz within sparse; return the verdict."""
+    sent = -1.0
+    for t in np.arange(0.0, until, STEP):
+        q = arm(t)
+        if t - sent < (0.1 if sparse[0] <= t < sparse[1] else 0.01) - 1e-9:
+            continue
+        sent = t
+        verdict = detector.update(t, q + rng.normal(0.0, 0.001, 7))
+        if verdict is not Verdict.MOVING:
+            return verdict
+    return Verdict.MOVING
+
+
+def test_two_states_tell_no_motion_from_noise():
+    # with fewer than three states there is no second difference to judge the noise by:
+    # judged as none, two states 0.1 s apart (a mock catching up) differing by their noise
+    # read as the start of a path that had not begun
+    jtc = trajectory()
+    detector = BlockDetector(jtc, 0.0, DetectorSettings(), expect_motion=True)
+    rng = np.random.default_rng(0)
+    for t in (0.0, 0.1):
+        detector.update(t, Q0 + rng.normal(0.0, 0.002, 7))
+    moved, allowance = detector.moved()
+    assert moved > DetectorSettings().stall_motion and allowance == np.inf
+    assert not detector.started
 
 
 def test_a_burst_held_up_in_delivery_is_no_block_when_dated_by_stamps():

@@ -30,6 +30,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 import numpy as np
 from probdis_ros.model import FailureMap, iiwa_arm
 from probdis_ros.model.arms import TaskSpace
+from probdis_ros.ros import MOCK_NODE
 from probdis_ros.ros.bag_source import Bag, BagError
 from probdis_ros.ros.messages import duration
 from probdis_ros.ros.mock_iiwa_node import MockIiwa
@@ -44,7 +45,16 @@ from ros_harness import JOINTS, RosTest, wait_for
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
-from test_ros_nodes import finished, free_scenario, GOAL, mock, mock_process, planner, START
+from test_ros_nodes import (
+    finished,
+    free_scenario,
+    GOAL,
+    mock,
+    mock_process,
+    planner,
+    serving,
+    START,
+)
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 pytestmark = pytest.mark.ros
@@ -877,9 +887,11 @@ def test_a_block_is_seen_promptly_through_joint_state_noise_at_1khz(ros, tmp_pat
     # velocities differenced from such positions would be 7 rad/s of noise, which the state
     # check refuses (test_velocities_differenced_from_very_noisy_positions_are_refused):
     # these states carry none
-    planner(ros, tmp_path, motion_delay=0.04, velocity_scaling=0.1, method='probabilistic')
+    node = planner(ros, tmp_path, motion_delay=0.04, velocity_scaling=0.1,
+                   method='probabilistic', controller_node=f'/{MOCK_NODE}')
     arm = mock_process(ros, 'rate:=1000.0', 'noise:=0.005', 'seed:=2',
                        'publish_velocities:=false')
+    serving(node)
     events = []
     ros.probe.create_subscription(String, '/probdis_planner/failures',
                                   lambda m: events.append(json.loads(m.data)), 10)

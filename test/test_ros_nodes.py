@@ -932,10 +932,23 @@ def mock_process(ros, *params):
                              '--ros-args', *args], env=env)
 
 
+def serving(node, timeout=60.0):
+    """
+    Wait until a mock process answers the planner node's parameter requests.
+
+    A run started at the mock's first joint states meets a mock still starting up: its
+    services not yet found, its executor busy.  The node's controller_node must be the
+    mock's (``/mock_iiwa``).
+    """
+    wait_for(lambda: node.controller_setting.value is not None, timeout,
+             "the mock's controller to answer")
+
+
 def test_joint_state_noise_gives_no_false_blocks(ros, tmp_path):
-    planner(ros, tmp_path, velocity_scaling=0.5)
+    node = planner(ros, tmp_path, velocity_scaling=0.5, controller_node=f'/{MOCK_NODE}')
     arm = mock_process(ros, f'scenario:={free_scenario(tmp_path)}', 'noise:=0.001', 'seed:=3')
     try:
+        serving(node)
         wait_for(lambda: ros.call('start', timeout=30).success, 30, 'start')
         wait_for(lambda: finished(ros), 60, 'the run to end')
         assert ros.status['state'] == 'succeeded'
@@ -950,8 +963,10 @@ def test_the_planner_keeps_up_with_joint_states_at_1khz(ros, tmp_path):
     # the kinematic arm lags its command by the driver's filter alone (0.04 s); at full speed
     # a block during the acceleration is traced back to the motion's start (a known limit of
     # the onset, README), so this runs at 0.3
-    node = planner(ros, tmp_path, state_timeout=2.0, motion_delay=0.04, velocity_scaling=0.3)
+    node = planner(ros, tmp_path, state_timeout=2.0, motion_delay=0.04, velocity_scaling=0.3,
+                   controller_node=f'/{MOCK_NODE}')
     arm = mock_process(ros, 'rate:=1000.0')
+    serving(node)
     ages = []
     # how long ago the newest accepted state arrived (its stamp may be older: a starved
     # mock runs late; the planner's own backlog is what this test is about)

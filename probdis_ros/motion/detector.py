@@ -166,6 +166,10 @@ LATE_TAKE = 0.05
 SETTLE_WINDOW = 0.1
 #: ... judged on at least this many states (fewer: not at rest)
 SETTLE_SAMPLES = 4
+#: States further apart than this many times the stream's period (:class:`StatePeriod`)
+#: were lost or held back on their way: the noise, and with it a stall or a start, is
+#: judged on the states since (``BlockDetector._dense_history``).
+STATE_GAP = 4.0
 #: An echo is looked for this far [s] either way of a state's time (the controller's phase
 #: and the state's delivery are not known), in steps of ECHO_STEP [s].
 ECHO_WINDOW = 0.03
@@ -434,6 +438,30 @@ class Onset:
     velocity: np.ndarray
 
 
+class StatePeriod:
+    """
+    The joint states' period: the median spacing of the last ``size`` states [s].
+
+    One per stream (the run's, handed to each path's detector), so that a path that begins
+    in a gap knows the stream was denser before it.
+    """
+
+    def __init__(self, size: int = 200) -> None:
+        self._spacings: deque[float] = deque(maxlen=size)
+        self._last: float | None = None
+
+    def add(self, now: float) -> None:
+        """Note a state at now [s] (a repeated or earlier time adds nothing)."""
+        if self._last is not None and now > self._last:
+            self._spacings.append(now - self._last)
+        self._last = now if self._last is None else max(self._last, now)
+
+    @property
+    def period(self) -> float:
+        """Return the median spacing (inf before two states)."""
+        return float(np.median(self._spacings)) if self._spacings else math.inf
+
+
 class BlockDetector:
     """
     Watches one trajectory: feed it (time, measured configuration) samples.
@@ -447,8 +475,12 @@ class BlockDetector:
     def __init__(self, path, start_time: float, settings: DetectorSettings | None = None,
                  expect_motion: bool = False,
                  pressed_start: tuple[np.ndarray, np.ndarray] | None = None,
-                 limits: tuple[np.ndarray, np.ndarray] | None = None) -> None:
+                 limits: tuple[np.ndarray, np.ndarray] | None = None,
+                 state_period: StatePeriod | None = None) -> None:
         self.path = path
+        # the stream's period; given one, its owner notes the states, else the detector
+        self._own_period = state_period is None
+        self.state_period = StatePeriod() if state_period is None else state_period
         self._limits = None if limits is None else \
             (np.asarray(limits[0], dtype=float), np.asarray(limits[1], dtype=float))
         # (the command's start position, the measured one) of a command that starts pressed
@@ -525,6 +557,8 @@ class BlockDetector:
         allowance = s.speed_allowance * np.maximum(
             np.abs(velocity), self.path.peak_speed(lagging - s.speed_allowance, lagging))
         self._track_onset(now, measured, velocity, s.onset_gap + float(allowance.sum()))
+        if self._own_period:
+            self.state_period.add(now)
         self._history.append((now, measured.copy()))
         if t <= ENDS or not self._first:
             self._first.append(measured.copy())
@@ -585,9 +619,10 @@ class BlockDetector:
                                    f'above its ceiling {limit:.4f}')
         if ended and t >= self.path.duration + s.motion_delay + s.settle_time:
             return self._gap_block(f'gap {self.gap:.3f} rad {s.settle_time} s after the end')
-        if now - self._history[0][0] >= s.stall_time * 0.9:
-            times = np.array([sample[0] for sample in self._history])
-            motion, noise = motion_over(times, np.array([sample[1] for sample in self._history]))
+        dense = self._dense_history()
+        if now - dense[0][0] >= s.stall_time * 0.9:
+            times = np.array([when for when, _ in dense])
+            motion, noise = motion_over(times, np.array([q for _, q in dense]))
             if motion < s.stall_motion + noise:
                 return self._gap_block(f'stalled with gap {self.gap:.3f} rad (moved {motion:.3f} '
                                        f'rad in {times[-1] - times[0]:.2f} s)')
@@ -697,6 +732,22 @@ class BlockDetector:
         """Tell whether the command began pressed in and has not yet come back to the arm."""
         return self._pressed is not None
 
+    def _dense_history(self) -> list[tuple[float, np.ndarray]]:
+        """
+        Return the history's states since its last gap (``STATE_GAP`` x the stream's period).
+
+        The noise is judged on them alone: across a gap a second difference holds the arm's
+        acceleration over it.  States 0.1 s apart (a mock catching up on its periods)
+        called an arm that had not moved started, on one state's noise against another's,
+        and one that moved 0.8 rad in 0.3 s stalled.
+        """
+        longest = STATE_GAP * self.state_period.period
+        history = list(self._history)
+        for k in range(len(history) - 1, 0, -1):
+            if history[k][0] - history[k - 1][0] > longest:
+                return history[k:]
+        return history
+
     def moved(self) -> tuple[float, float]:
         """
         Return how far (L1) the arm has moved since the command began, and the noise allowance.
@@ -708,7 +759,10 @@ class BlockDetector:
         now = self._history[-1][0]
         last = np.array([q for when, q in self._history if when >= now - ENDS])
         first = np.array(self._first)
-        sigma = noise_of(np.array([q for _, q in self._history]))
+        dense = self._dense_history()
+        if len(dense) < 3:      # no noise to judge by yet: no motion is told from it
+            return float(np.abs(last.mean(axis=0) - first.mean(axis=0)).sum()), math.inf
+        sigma = noise_of(np.array([q for _, q in dense]))
         error = sigma * np.sqrt(1.0 / len(first) + 1.0 / len(last))
         return (float(np.abs(last.mean(axis=0) - first.mean(axis=0)).sum()),
                 self.settings.stall_motion + NOISE_SIGMAS * float(error.sum()))

@@ -43,6 +43,7 @@ from probdis_ros.motion.detector import (
     BlockDetector,
     DetectorSettings,
     ExternalTorqueObserver,
+    StatePeriod,
     Verdict,
 )
 from probdis_ros.motion.jtc import (
@@ -289,6 +290,7 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
     # the detector the live planner ran (its status carries it), unless the caller chose one
     settings = result.settings = given or detector_settings({}, overrides)
     observer = ExternalTorqueObserver(settings)         # the live run's estimate
+    state_period = StatePeriod()                        # ... and the states' period
     states = StateCheck(names, arm.lower, arm.upper, arm.velocity_limits)
     limits = (arm.lower, arm.upper)
     measured = None
@@ -371,7 +373,8 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
             # late is judged from when it began)
             detector = BlockDetector(timed, t, settings, expect_motion=kind == 'path' and
                                      not pressed and pressed_start is None,
-                                     pressed_start=pressed_start, limits=limits)
+                                     pressed_start=pressed_start, limits=limits,
+                                     state_period=state_period)
             continue
         # the live planner's gate, and its dating: by stamp on the recording's clock
         received, stamp = t + t0, stamp_seconds(msg)
@@ -385,6 +388,7 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
             t = redated                # as the planner computed it, to the last bit
         offset = states.clock_offset + (t - redated)
         measured, measured_velocity = q, v
+        state_period.add(t)
         if early is not None:
             sent, command = early
             command, early = moved_onto_clock(command, offset - t0), None
@@ -395,7 +399,8 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
                 running = (JtcTrajectory(command, q, measured_velocity, sent), sent)
                 # a path from a free arm, as the live run's first one
                 detector, kind = (BlockDetector(running[0], sent, settings, expect_motion=True,
-                                                limits=limits), 'path')
+                                                limits=limits, state_period=state_period),
+                                  'path')
                 result.paths += 1
                 result.problems.append(f'{sent:.3f} s: command before any joint state: '
                                        f'started from the first one, at {t:.3f} s')
