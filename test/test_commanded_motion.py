@@ -1202,6 +1202,23 @@ def watch_sparse(detector, arm, until, rng, sparse):
     return Verdict.MOVING
 
 
+def test_the_state_period_is_the_streams_not_its_gaps():
+    # a mock stopped most of the time sends 4 of 5 states 0.1 s apart (catching up): taken
+    # for its period (a median did), those gaps hid no stall of the arm from the noise
+    period = StatePeriod()
+    assert period.period == np.inf
+    t = 0.0
+    for k in range(100):
+        t += 0.01 if k % 5 == 0 else 0.1
+        period.add(t)
+        period.add(t)               # a repeated time is no spacing
+    assert period.period == pytest.approx(0.01)
+    slow = StatePeriod()            # a 10 Hz driver: its spacing is its period
+    for k in range(50):
+        slow.add(0.1 * k)
+    assert slow.period == pytest.approx(0.1)
+
+
 def test_two_states_tell_no_motion_from_noise():
     # with fewer than three states there is no second difference to judge the noise by:
     # judged as none, two states 0.1 s apart (a mock catching up) differing by their noise
