@@ -72,7 +72,7 @@ from probdis_ros.motion.detector import (
     DetectorSettings,
     ExternalTorqueObserver,
     slope_of,
-    StatePeriod,
+    StateStream,
     Verdict,
 )
 from probdis_ros.motion.jtc import (
@@ -437,7 +437,7 @@ class Run:
         self.pressed = False                             # the last motion ended blocked
         self.blocked_still = False                       # ... without having moved the arm
         self._recent: deque[tuple[float, np.ndarray]] = deque()     # (time, measured)
-        self.state_period = StatePeriod()       # the joint states' period, for the detectors
+        self.state_stream = StateStream()       # the joint states' period and noise
         self.latencies: list[float] = []
         # the latest any command of the run began against motion_delay [s]: JTC took it late,
         # or the arm lags more than motion_delay (the detector shifts such a command)
@@ -502,7 +502,7 @@ class Run:
             self.bad_joint_state(problem)
             return
         self.measured = np.clip(np.asarray(config, dtype=float), self.arm.lower, self.arm.upper)
-        self.state_period.add(now)
+        self.state_stream.add(now)
         # observed at every state with efforts (it follows the arm's motion), kept while active
         external = None if effort is None else \
             self.torque_observer.update(now, self.measured, velocity, effort)
@@ -559,7 +559,8 @@ class Run:
         # neither can be told "not executed"; with a controller that stopped executing after
         # a block, every retreat and path was learned, a failure every 0.5 s until max_paths
         moved, allowance = detector.moved()
-        still = verdict is Verdict.BLOCKED and moved <= allowance
+        # no noise judged yet (allowance inf): not known to be still
+        still = verdict is Verdict.BLOCKED and moved <= allowance < math.inf
         still_again, self.blocked_still = still and self.blocked_still, still
         self.pressed = verdict is Verdict.BLOCKED
         if self.pressed and velocity is None:
@@ -932,7 +933,7 @@ class Run:
         self.detector = BlockDetector(self.trajectory, now, self.settings.detection,
                                       expect_motion=expect, pressed_start=pressed_start,
                                       limits=(self.arm.lower, self.arm.upper),
-                                      state_period=self.state_period)
+                                      stream=self.state_stream)
         self.rest_at = None
 
     def _completed(self, config: np.ndarray) -> None:

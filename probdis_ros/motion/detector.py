@@ -97,8 +97,9 @@ pressed), or the gap is within ``d_dist``, or the command has ended; they then s
 
 Motion is judged through the noise (:func:`motion_over`): a straight line fitted to each
 joint over the window gives the motion, and the joint-state noise (estimated from the
-samples' second differences) widens the threshold by ``NOISE_SIGMAS`` standard errors, so
-that 0.005 rad of noise at 1 kHz neither hides a stall nor looks like motion.
+samples' second differences, none across a gap in the stream: ``STATE_GAP``) widens the
+threshold by ``NOISE_SIGMAS`` standard errors, so that 0.005 rad of noise at 1 kHz neither
+hides a stall nor looks like motion.
 
 The ceilings and ``onset_gap`` grow by ``speed_allowance`` x the commanded speed (per joint,
 or L1; the largest over the last ``speed_allowance`` seconds of the command the arm is
@@ -166,10 +167,13 @@ LATE_TAKE = 0.05
 SETTLE_WINDOW = 0.1
 #: ... judged on at least this many states (fewer: not at rest)
 SETTLE_SAMPLES = 4
-#: States further apart than this many times the stream's period (:class:`StatePeriod`)
-#: were lost or held back on their way: the noise, and with it a stall or a start, is
-#: judged on the states since (``BlockDetector._dense_history``).
+#: Two states further apart than this many periods of the stream (:class:`StateStream`),
+#: and than ``MIN_STATE_GAP`` [s], have a gap between them: states lost or held up on their
+#: way.  A second difference across a gap holds the arm's motion over it, so the noise is
+#: judged on the others alone (a mock catching up sent states 0.1 s apart: an arm that moved
+#: 0.2 rad in 0.3 s read as stalled, one still as started).
 STATE_GAP = 4.0
+MIN_STATE_GAP = 0.03
 #: An echo is looked for this far [s] either way of a state's time (the controller's phase
 #: and the state's delivery are not known), in steps of ECHO_STEP [s].
 ECHO_WINDOW = 0.03
@@ -203,20 +207,31 @@ def noise_of(positions: np.ndarray) -> np.ndarray:
     A smooth motion adds next to nothing to a second difference; white noise of std. dev. s
     gives second differences of variance 6 s^2.
     """
-    positions = np.asarray(positions, dtype=float)
+    return _second_difference_noise(np.asarray(positions, dtype=float))[1]
+
+
+def _second_difference_noise(positions: np.ndarray, times: np.ndarray | None = None,
+                             longest: float = math.inf) -> tuple[int, np.ndarray]:
+    """Return how many second differences judged the noise, and the noise (0: none)."""
     if len(positions) < 3:
-        return np.zeros(positions.shape[1:])
+        return 0, np.zeros(positions.shape[1:])
     second = positions[2:] - 2.0 * positions[1:-1] + positions[:-2]
-    return np.sqrt(np.mean(second ** 2, axis=0) / 6.0)
+    if times is not None:
+        spacing = np.diff(times)
+        second = second[(spacing[1:] <= longest) & (spacing[:-1] <= longest)]
+        if not len(second):
+            return 0, np.zeros(positions.shape[1:])
+    return len(second), np.sqrt(np.mean(second ** 2, axis=0) / 6.0)
 
 
-def motion_over(times: np.ndarray, positions: np.ndarray) -> tuple[float, float]:
+def motion_over(times: np.ndarray, positions: np.ndarray,
+                noise: np.ndarray | None = None) -> tuple[float, float]:
     """
     Return the L1 motion over samples (times, positions (N, n)) and what noise could fake.
 
     The motion is each joint's least-squares slope times the span (an endpoint-to-endpoint
     measure that averages the noise out); the second value is ``NOISE_SIGMAS`` times the sum
-    of those estimates' standard errors.
+    of those estimates' standard errors.  noise: each joint's (default :func:`noise_of`).
     """
     times = np.asarray(times, dtype=float)
     positions = np.asarray(positions, dtype=float)
@@ -224,7 +239,7 @@ def motion_over(times: np.ndarray, positions: np.ndarray) -> tuple[float, float]
     if spread == 0.0:
         return 0.0, 0.0
     span = times[-1] - times[0]
-    error = noise_of(positions) * span / np.sqrt(spread)
+    error = (noise_of(positions) if noise is None else noise) * span / np.sqrt(spread)
     return float(np.abs(slope).sum() * span), NOISE_SIGMAS * float(error.sum())
 
 
@@ -438,29 +453,41 @@ class Onset:
     velocity: np.ndarray
 
 
-class StatePeriod:
+class StateStream:
     """
-    The joint states' period: the 10th percentile of the last ``size`` states' spacings [s].
+    What the joint states' stream has shown: its period, and its noise where last judged.
 
     One per stream (the run's, handed to each path's detector), so that a path that begins
-    in a gap knows the stream was denser before it.  Not the median: a mock stopped most of
-    the time sent four fifths of its states 0.1 s apart, and those gaps became the period.
+    in a gap knows the stream was denser, and its noise, before it.  The period is the 10th
+    percentile of the last ``size`` spacings, not their median: a mock stopped most of the
+    time sent four fifths of its states 0.1 s apart, and those gaps became the period.
     """
 
     def __init__(self, size: int = 200) -> None:
         self._spacings: deque[float] = deque(maxlen=size)
         self._last: float | None = None
+        self._period: float | None = None       # computed when asked, after a new spacing
+        self.noise: np.ndarray | None = None    # each joint's, where last judged [rad]
 
     def add(self, now: float) -> None:
         """Note a state at now [s] (a repeated or earlier time adds nothing)."""
         if self._last is not None and now > self._last:
             self._spacings.append(now - self._last)
+            self._period = None
         self._last = now if self._last is None else max(self._last, now)
 
     @property
     def period(self) -> float:
         """Return the stream's period; inf before two states."""
-        return float(np.quantile(self._spacings, 0.1)) if self._spacings else math.inf
+        if self._period is None:
+            self._period = float(np.quantile(self._spacings, 0.1)) if self._spacings \
+                else math.inf
+        return self._period
+
+    @property
+    def longest(self) -> float:
+        """Return the longest spacing that is no gap [s]."""
+        return max(STATE_GAP * self.period, MIN_STATE_GAP)
 
 
 class BlockDetector:
@@ -477,11 +504,11 @@ class BlockDetector:
                  expect_motion: bool = False,
                  pressed_start: tuple[np.ndarray, np.ndarray] | None = None,
                  limits: tuple[np.ndarray, np.ndarray] | None = None,
-                 state_period: StatePeriod | None = None) -> None:
+                 stream: StateStream | None = None) -> None:
         self.path = path
-        # the stream's period; given one, its owner notes the states, else the detector
-        self._own_period = state_period is None
-        self.state_period = StatePeriod() if state_period is None else state_period
+        # the stream's period and noise; given one, its owner notes the states, else this
+        self._own_stream = stream is None
+        self.stream = StateStream() if stream is None else stream
         self._limits = None if limits is None else \
             (np.asarray(limits[0], dtype=float), np.asarray(limits[1], dtype=float))
         # (the command's start position, the measured one) of a command that starts pressed
@@ -558,8 +585,8 @@ class BlockDetector:
         allowance = s.speed_allowance * np.maximum(
             np.abs(velocity), self.path.peak_speed(lagging - s.speed_allowance, lagging))
         self._track_onset(now, measured, velocity, s.onset_gap + float(allowance.sum()))
-        if self._own_period:
-            self.state_period.add(now)
+        if self._own_stream:
+            self.stream.add(now)
         self._history.append((now, measured.copy()))
         if t <= ENDS or not self._first:
             self._first.append(measured.copy())
@@ -620,10 +647,10 @@ class BlockDetector:
                                    f'above its ceiling {limit:.4f}')
         if ended and t >= self.path.duration + s.motion_delay + s.settle_time:
             return self._gap_block(f'gap {self.gap:.3f} rad {s.settle_time} s after the end')
-        dense = self._dense_history()
-        if now - dense[0][0] >= s.stall_time * 0.9:
-            times = np.array([when for when, _ in dense])
-            motion, noise = motion_over(times, np.array([q for _, q in dense]))
+        if now - self._history[0][0] >= s.stall_time * 0.9 and \
+                (sigma := self._noise()) is not None:
+            times = np.array([when for when, _ in self._history])
+            motion, noise = motion_over(times, np.array([q for _, q in self._history]), sigma)
             if motion < s.stall_motion + noise:
                 return self._gap_block(f'stalled with gap {self.gap:.3f} rad (moved {motion:.3f} '
                                        f'rad in {times[-1] - times[0]:.2f} s)')
@@ -661,7 +688,8 @@ class BlockDetector:
             return ''
         times, positions = self._last_window()
         speed = np.maximum((slope_of(times, positions) - velocity) * outward, 0.0)
-        noise = NOISE_SIGMAS * noise_of(np.array([q for _, q in self._history]))
+        sigma = self._noise()
+        noise = NOISE_SIGMAS * (np.zeros(len(measured)) if sigma is None else sigma)
         pushed = (room - speed * LIMIT_HORIZON < room_limit) & (beyond - noise > LIMIT_PUSH)
         if not pushed.any():
             return ''
@@ -733,21 +761,22 @@ class BlockDetector:
         """Tell whether the command began pressed in and has not yet come back to the arm."""
         return self._pressed is not None
 
-    def _dense_history(self) -> list[tuple[float, np.ndarray]]:
+    def _noise(self) -> np.ndarray | None:
         """
-        Return the history's states since its last gap (``STATE_GAP`` x the stream's period).
+        Return each joint's noise in the history, judged apart from its gaps (None: unknown).
 
-        The noise is judged on them alone: across a gap a second difference holds the arm's
-        acceleration over it.  States 0.1 s apart (a mock catching up on its periods)
-        called an arm that had not moved started, on one state's noise against another's,
-        and one that moved 0.8 rad in 0.3 s stalled.
+        Judged on no second difference (fewer than three states, or all across gaps), it is
+        the stream's where last judged, unknown before: as zero, two states 0.1 s apart
+        told a path that had not begun from its noise as begun.
         """
-        longest = STATE_GAP * self.state_period.period
-        history = list(self._history)
-        for k in range(len(history) - 1, 0, -1):
-            if history[k][0] - history[k - 1][0] > longest:
-                return history[k:]
-        return history
+        history = self._history
+        count, sigma = _second_difference_noise(
+            np.array([q for _, q in history]), np.array([when for when, _ in history]),
+            self.stream.longest)
+        if count:
+            self.stream.noise = sigma
+            return sigma
+        return self.stream.noise
 
     def moved(self) -> tuple[float, float]:
         """
@@ -760,10 +789,9 @@ class BlockDetector:
         now = self._history[-1][0]
         last = np.array([q for when, q in self._history if when >= now - ENDS])
         first = np.array(self._first)
-        dense = self._dense_history()
-        if len(dense) < 3:      # no noise to judge by yet: no motion is told from it
+        sigma = self._noise()
+        if sigma is None:       # no noise to judge by yet: no motion is told from it
             return float(np.abs(last.mean(axis=0) - first.mean(axis=0)).sum()), math.inf
-        sigma = noise_of(np.array([q for _, q in dense]))
         error = sigma * np.sqrt(1.0 / len(first) + 1.0 / len(last))
         return (float(np.abs(last.mean(axis=0) - first.mean(axis=0)).sum()),
                 self.settings.stall_motion + NOISE_SIGMAS * float(error.sum()))

@@ -43,7 +43,7 @@ from probdis_ros.motion.detector import (
     BlockDetector,
     DetectorSettings,
     ExternalTorqueObserver,
-    StatePeriod,
+    StateStream,
     Verdict,
 )
 from probdis_ros.motion.jtc import (
@@ -290,7 +290,7 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
     # the detector the live planner ran (its status carries it), unless the caller chose one
     settings = result.settings = given or detector_settings({}, overrides)
     observer = ExternalTorqueObserver(settings)         # the live run's estimate
-    state_period = StatePeriod()                        # ... and the states' period
+    state_stream = StateStream()                        # ... and the states' stream
     states = StateCheck(names, arm.lower, arm.upper, arm.velocity_limits)
     limits = (arm.lower, arm.upper)
     measured = None
@@ -374,7 +374,7 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
             detector = BlockDetector(timed, t, settings, expect_motion=kind == 'path' and
                                      not pressed and pressed_start is None,
                                      pressed_start=pressed_start, limits=limits,
-                                     state_period=state_period)
+                                     stream=state_stream)
             continue
         # the live planner's gate, and its dating: by stamp on the recording's clock
         received, stamp = t + t0, stamp_seconds(msg)
@@ -388,7 +388,7 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
             t = redated                # as the planner computed it, to the last bit
         offset = states.clock_offset + (t - redated)
         measured, measured_velocity = q, v
-        state_period.add(t)
+        state_stream.add(t)
         if early is not None:
             sent, command = early
             command, early = moved_onto_clock(command, offset - t0), None
@@ -399,7 +399,7 @@ def _run(source: Bag, topics: list[str], trajectory_topic: str, status_topics: s
                 running = (JtcTrajectory(command, q, measured_velocity, sent), sent)
                 # a path from a free arm, as the live run's first one
                 detector, kind = (BlockDetector(running[0], sent, settings, expect_motion=True,
-                                                limits=limits, state_period=state_period),
+                                                limits=limits, stream=state_stream),
                                   'path')
                 result.paths += 1
                 result.problems.append(f'{sent:.3f} s: command before any joint state: '
